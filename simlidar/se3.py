@@ -1,0 +1,102 @@
+"""Small SE(3) helpers on 4x4 homogeneous matrices (float64), vectorised over a leading axis.
+
+Twists are ordered ``xi = (rho, omega)``: translation part first, rotation part
+(axis-angle, radians) second, so that ``exp(xi)`` of a pure translation is that
+translation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def hat(w: np.ndarray) -> np.ndarray:
+    """(..., 3) vectors -> (..., 3, 3) skew-symmetric matrices with ``hat(w) @ v = w x v``."""
+    w = np.asarray(w, dtype=float)
+    out = np.zeros(w.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
+    return out
+
+
+def make(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotations and (..., 3) translations -> (..., 4, 4) transforms."""
+    R = np.asarray(R, dtype=float)
+    T = np.zeros(R.shape[:-2] + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) -> (..., 4, 4) inverse of rigid transforms."""
+    R = np.swapaxes(T[..., :3, :3], -1, -2)
+    return make(R, -np.einsum("...ij,...j->...i", R, T[..., :3, 3]))
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a (4, 4) transform to (N, 3) points."""
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def _v_matrix(omega: np.ndarray) -> np.ndarray:
+    """(..., 3) rotation vectors -> (..., 3, 3) left Jacobian V of SO(3)."""
+    theta = np.linalg.norm(omega, axis=-1)[..., None, None]
+    W = hat(omega)
+    W2 = W @ W
+    small = theta < 1e-8
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (th - np.sin(th)) / th**3)
+    return np.eye(3) + a * W + b * W2
+
+
+def exp(xi: np.ndarray) -> np.ndarray:
+    """(..., 6) twists (rho, omega) -> (..., 4, 4) transforms."""
+    xi = np.asarray(xi, dtype=float)
+    rho, omega = xi[..., :3], xi[..., 3:]
+    R = Rotation.from_rotvec(omega.reshape(-1, 3)).as_matrix().reshape(omega.shape[:-1] + (3, 3))
+    t = np.einsum("...ij,...j->...i", _v_matrix(omega), rho)
+    return make(R, t)
+
+
+def log(T: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) transforms -> (..., 6) twists (rho, omega)."""
+    T = np.asarray(T, dtype=float)
+    R = T[..., :3, :3]
+    omega = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(R.shape[:-2] + (3,))
+    rho = np.linalg.solve(_v_matrix(omega), T[..., :3, 3][..., None])[..., 0]
+    return np.concatenate([rho, omega], axis=-1)
+
+
+def interpolate(T_a: np.ndarray, T_b: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Screw-motion interpolation ``T_a exp(s log(T_a^-1 T_b))``.
+
+    T_a, T_b: (4, 4) or (..., 4, 4) broadcastable with s; s: (...) fractions
+    (0 gives T_a, 1 gives T_b; values outside [0, 1] extrapolate).
+    """
+    s = np.asarray(s, dtype=float)
+    xi = log(inverse(T_a) @ T_b)
+    return T_a @ exp(xi * s[..., None])
+
+
+def rotation_angle(T: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) -> (...) rotation angle in radians."""
+    tr = np.trace(T[..., :3, :3], axis1=-2, axis2=-1)
+    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+
+
+def kitti_lines_to_poses(rows: np.ndarray) -> np.ndarray:
+    """(N, 12) row-major 3x4 KITTI pose lines -> (N, 4, 4)."""
+    rows = np.asarray(rows, dtype=float).reshape(-1, 12)
+    T = np.tile(np.eye(4), (len(rows), 1, 1))
+    T[:, :3, :4] = rows.reshape(-1, 3, 4)
+    return T
+
+
+def poses_to_kitti_lines(T: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) -> (N, 12) row-major 3x4 KITTI pose lines."""
+    return np.asarray(T)[:, :3, :4].reshape(-1, 12)

@@ -1,0 +1,221 @@
+"""One rotation of a spinning lidar: rays per (ring, column), firing times, motion, noise.
+
+Frames: each ray leaves from the sensor pose at its own firing time (motion
+distortion, on by default). Every returned coordinate, point or normal, is
+expressed in the sensor frame at the sweep's *reference time*, which is the
+sweep's start (time 0 of ``time_s``, the time written to ``times.txt`` and the
+pose written to ``poses.txt``). With motion distortion off, all rays leave from
+the reference pose.
+
+Noise model per return: measured range = true range + ring bias (fixed per
+laser, optional) + N(0, range_noise_std_m^2); the point is placed along the
+beam at the measured range. Returns whose measured range falls outside
+[min_range_m, max_range_m] are dropped, as are random dropouts (optional).
+Misses produce no return.
+
+Intensity model (documented, not calibrated): ``reflectance(label) * |cos a| *
+min(1, (r_ref / r)^2)``, with ``a`` the angle of incidence and ``r_ref`` the
+sensor's ``intensity_range_ref_m``; values in [0, 1].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import se3
+from .raycast import Raycaster
+from .sensor import LidarModel
+from .trajectory import Trajectory
+from .world import World
+
+SIDECAR_DTYPE = np.dtype(
+    [
+        ("ring", "<u2"),
+        ("azimuth_index", "<u4"),
+        ("time_s", "<f8"),
+        ("range_m", "<f4"),
+        ("true_range_m", "<f4"),
+        ("true_xyz", "<f4", (3,)),
+        ("normal", "<f4", (3,)),
+        ("object_id", "<i4"),
+    ]
+)
+
+
+@dataclass
+class Scan:
+    """The returns of one sweep, ordered by firing (column, then ring).
+
+    xyz: (N, 3) float64 measured points, sensor frame at the reference time, metres.
+    intensity: (N,) float32 in [0, 1].
+    ring: (N,) int, 0 = lowest beam.  azimuth_index: (N,) int column index.
+    time_s: (N,) float64 firing time since the sweep start, seconds.
+    range_m: (N,) measured range; true_range_m: (N,) noise-free range, metres.
+    true_xyz: (N, 3) noise-free hit point, same frame as ``xyz``.
+    normal: (N, 3) unit surface normal of the hit triangle, same frame, facing the sensor.
+    object_id: (N,) int32 id of the hit object.
+    """
+
+    xyz: np.ndarray
+    intensity: np.ndarray
+    ring: np.ndarray
+    azimuth_index: np.ndarray
+    time_s: np.ndarray
+    range_m: np.ndarray
+    true_range_m: np.ndarray
+    true_xyz: np.ndarray
+    normal: np.ndarray
+    object_id: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.xyz)
+
+    def sidecar(self) -> np.ndarray:
+        """The per-point fields KITTI's .bin lacks, as a structured array (SIDECAR_DTYPE)."""
+        rec = np.zeros(len(self), dtype=SIDECAR_DTYPE)
+        rec["ring"] = self.ring
+        rec["azimuth_index"] = self.azimuth_index
+        rec["time_s"] = self.time_s
+        rec["range_m"] = self.range_m
+        rec["true_range_m"] = self.true_range_m
+        rec["true_xyz"] = self.true_xyz
+        rec["normal"] = self.normal
+        rec["object_id"] = self.object_id
+        return rec
+
+
+class SensorInsideGeometry(ValueError):
+    """The sensor origin lies inside a solid of the world."""
+
+
+class SweepSimulator:
+    """Simulates sweeps of ``sensor`` in ``world``.
+
+    Args:
+        world: the mesh with object ids and labels.
+        sensor: the lidar model.
+        seed: seeds the per-laser bias (drawn once here) and every frame's noise.
+        motion_distortion: each firing from its own pose (True) or all from the
+            reference pose (False).
+        threads: Embree worker threads (default: all cores).
+    """
+
+    def __init__(
+        self,
+        world: World,
+        sensor: LidarModel,
+        seed: int = 0,
+        motion_distortion: bool = True,
+        threads: int | None = None,
+        raycaster: Raycaster | None = None,
+    ):
+        self.world = world
+        self.sensor = sensor
+        self.seed = int(seed)
+        self.motion_distortion = motion_distortion
+        self.raycaster = raycaster or Raycaster(world.vertices, world.faces, threads=threads)
+        self._reflectance = world.object_reflectance
+        cols, rings = sensor.columns_per_sweep, sensor.rings
+        # Ray tables in firing order: column-major, rings ascending within a column.
+        self.ray_column = np.repeat(np.arange(cols), rings)
+        self.ray_ring = np.tile(np.arange(rings), cols)
+        self.ray_time_s = sensor.firing_time_s(self.ray_ring, self.ray_column)
+        # Rays sharing a firing time share a pose: interpolate once per distinct time.
+        self._times_unique, self._ray_time_idx = np.unique(self.ray_time_s, return_inverse=True)
+        self._dir_local = self._directions(
+            sensor.elevation_rad[self.ray_ring],
+            sensor.column_azimuth_rad(self.ray_column) + sensor.ring_azimuth_offset_rad[self.ray_ring],
+        )
+        bias_rng = np.random.default_rng([self.seed, 0xB1A5])
+        self.ring_bias_m = bias_rng.normal(0.0, 1.0, rings) * sensor.ring_bias_std_m
+
+    @staticmethod
+    def _directions(elevation: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
+        ce = np.cos(elevation)
+        return np.stack([ce * np.cos(azimuth), ce * np.sin(azimuth), np.sin(elevation)], axis=1)
+
+    def check_clear(self, pose: np.ndarray, where: str = "") -> None:
+        """Raise ``SensorInsideGeometry`` if the sensor at ``pose`` (4, 4) is inside a solid.
+
+        Probe rays in all directions; if most of the surfaces they reach are seen
+        from their back (inside) side, the origin is enclosed by a solid: inside a
+        building, or under the ground.
+        """
+        golden = np.pi * (3.0 - np.sqrt(5.0))
+        k = np.arange(200) + 0.5
+        z = 1 - 2 * k / 200
+        r = np.sqrt(1 - z**2)
+        dirs = np.stack([r * np.cos(golden * k), r * np.sin(golden * k), z], axis=1)
+        hits = self.raycaster.cast(pose[:3, 3], dirs, 1e6)
+        n_hit = int(hits.hit.sum())
+        if n_hit and hits.back_face[hits.hit].mean() > 0.5:
+            p = pose[:3, 3]
+            raise SensorInsideGeometry(
+                f"{where}sensor at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m is inside geometry: "
+                f"{int(hits.back_face.sum())} of {n_hit} probe rays hit the inside of a surface"
+            )
+
+    def sweep(self, trajectory: Trajectory, t0: float, frame_index: int = 0) -> Scan:
+        """Simulate the sweep that starts at time ``t0`` (s) along ``trajectory``.
+
+        The noise of frame ``frame_index`` is drawn from its own generator seeded
+        with (seed, frame_index), so frames are reproducible in any order.
+        """
+        s = self.sensor
+        rng = np.random.default_rng([self.seed, 1, int(frame_index)])
+        T_ref = trajectory.pose_at(np.array([t0]))[0]
+        dir_local = self._dir_local
+        if s.angular_jitter_deg > 0:
+            jit = np.radians(s.angular_jitter_deg)
+            dir_local = self._directions(
+                s.elevation_rad[self.ray_ring] + rng.normal(0, jit, len(self.ray_ring)),
+                s.column_azimuth_rad(self.ray_column)
+                + s.ring_azimuth_offset_rad[self.ray_ring]
+                + rng.normal(0, jit, len(self.ray_ring)),
+            )
+        if self.motion_distortion:
+            T_world = trajectory.pose_at(t0 + self._times_unique)
+            T_rel = se3.inverse(T_ref) @ T_world  # firing pose in the reference frame
+            R_rel = T_rel[self._ray_time_idx, :3, :3]
+            origin_rel = T_rel[self._ray_time_idx, :3, 3]
+            dir_rel = np.einsum("nij,nj->ni", R_rel, dir_local)
+        else:
+            origin_rel = np.zeros((1, 3))
+            dir_rel = dir_local
+        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3]
+        origins_world = origin_rel @ R_ref.T + t_ref
+        dirs_world = dir_rel @ R_ref.T
+        hits = self.raycaster.cast(origins_world, dirs_world, s.max_range_m + 1.0)
+
+        idx = np.flatnonzero(hits.hit)
+        true_range = hits.distance[idx]
+        ring = self.ray_ring[idx]
+        measured = true_range + self.ring_bias_m[ring] + rng.normal(0.0, 1.0, len(idx)) * s.range_noise_std_m
+        keep = (measured >= s.min_range_m) & (measured <= s.max_range_m)
+        if s.dropout_probability > 0:
+            keep &= rng.random(len(idx)) >= s.dropout_probability
+        idx, true_range, measured, ring = idx[keep], true_range[keep], measured[keep], ring[keep]
+
+        o = origin_rel if len(origin_rel) == 1 else origin_rel[idx]
+        d = dir_rel[idx]
+        xyz = o + measured[:, None] * d
+        true_xyz = o + true_range[:, None] * d
+        normal = hits.normal[idx] @ R_ref  # world -> reference sensor frame
+        obj = self.world.face_object_id[hits.face[idx]]
+        cos_inc = np.abs(np.einsum("ij,ij->i", normal, d))
+        falloff = np.minimum(1.0, (s.intensity_range_ref_m / np.maximum(measured, 1e-6)) ** 2)
+        intensity = (self._reflectance[obj] * cos_inc * falloff).astype(np.float32)
+        return Scan(
+            xyz=xyz,
+            intensity=intensity,
+            ring=ring,
+            azimuth_index=self.ray_column[idx],
+            time_s=self.ray_time_s[idx],
+            range_m=measured,
+            true_range_m=true_range,
+            true_xyz=true_xyz,
+            normal=normal,
+            object_id=obj,
+        )

@@ -1,0 +1,189 @@
+"""The ``salo`` command line: thin commands over library calls.
+
+Heavy imports (Embree, matplotlib, pyvista) happen inside the commands that
+need them, so ``salo --help`` is instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from simlidar.dataset import DatasetError
+from simlidar.sensor import SensorError, load_sensor, preset_names
+
+# Errors that are the user's input, reported in one line without a traceback.
+USER_ERRORS: tuple[type[BaseException], ...] = (SensorError, DatasetError, FileExistsError)
+
+
+class CommandError(Exception):
+    """A command cannot proceed; the message says why."""
+
+
+def _progress(total: int, unit: str, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit=unit, desc=desc, dynamic_ncols=True, file=sys.stderr)
+
+
+# ---------------------------------------------------------------- simulate
+def _add_simulate(sub) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a lidar sequence (KITTI layout + ground-truth sidecar)",
+        description="Simulate consecutive sweeps of a spinning lidar along a path through a "
+        "world, and write them as a sequence folder (KITTI odometry layout, sensor.yaml, "
+        "manifest and per-point ground truth).",
+    )
+    world = p.add_argument_group("world and path (a mesh with a pose file)")
+    world.add_argument("--mesh", type=Path, help="world mesh: PLY, OBJ, GLB or STL")
+    world.add_argument(
+        "--poses",
+        type=Path,
+        help="KITTI-format lidar poses in the mesh's frame, one per sweep start "
+        "(interpolated on SE(3) in between)",
+    )
+    world.add_argument("--times", type=Path, help="times of the --poses lines, s (default: 1/rate apart)")
+    p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
+    p.add_argument("--frames", type=int, help="number of sweeps (default: one per pose)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+    p.add_argument("--noise-std", type=float, help="range noise standard deviation, m (overrides the sensor)")
+    p.add_argument(
+        "--no-motion-distortion",
+        dest="motion_distortion",
+        action="store_false",
+        help="fire every ray of a sweep from the sweep's start pose",
+    )
+    p.add_argument("--out", type=Path, required=True, help="output sequence folder")
+    p.add_argument("--force", action="store_true", help="replace an existing output folder")
+    p.set_defaults(func=cmd_simulate)
+
+
+def _sensor_from_args(args):
+    sensor = load_sensor(args.sensor)
+    if getattr(args, "noise_std", None) is not None:
+        sensor = sensor.with_overrides(range_noise_std_m=args.noise_std)
+    return sensor
+
+
+def cmd_simulate(args) -> int:
+    from simlidar.dataset import read_kitti_poses, read_times
+    from simlidar.trajectory import SampledTrajectory
+    from simlidar.world import load_world
+
+    sensor = _sensor_from_args(args)
+    if args.mesh is None or args.poses is None:
+        raise CommandError("give --mesh FILE and --poses FILE")
+    world = load_world(args.mesh)
+    poses = read_kitti_poses(args.poses)
+    if args.times is not None:
+        times = read_times(args.times)
+        if len(times) != len(poses):
+            raise DatasetError(f"{args.times}: {len(times)} times for {len(poses)} poses in {args.poses}")
+    else:
+        times = sensor.sweep_period_s * __import__("numpy").arange(len(poses))
+    try:
+        trajectory = SampledTrajectory(times, poses)
+    except ValueError as exc:
+        raise DatasetError(f"{args.times or args.poses}: {exc}") from None
+    frames = args.frames if args.frames is not None else len(poses)
+    info = {"mesh": str(args.mesh), "poses_file": str(args.poses), "command": "simulate"}
+    return _run_simulation(world, trajectory, sensor, args, frames, info, where=str(args.poses))
+
+
+def _run_simulation(world, trajectory, sensor, args, frames, info, where) -> int:
+    from simlidar.simulate import simulate_sequence
+    from simlidar.sweep import SensorInsideGeometry
+
+    bar = _progress(frames, "sweep", "simulate")
+    try:
+        simulate_sequence(
+            world,
+            trajectory,
+            sensor,
+            args.out,
+            frames=frames,
+            seed=args.seed,
+            motion_distortion=args.motion_distortion,
+            info={**info, "noise_std_m": sensor.range_noise_std_m},
+            force=args.force,
+            on_frame=lambda k, scan: bar.update(1),
+        )
+    except SensorInsideGeometry as exc:
+        raise CommandError(f"{where}: {exc}") from None
+    finally:
+        bar.close()
+    print(f"wrote {frames} frames to {args.out}")
+    return 0
+
+
+# ---------------------------------------------------------------- sensors
+def _add_sensors(sub) -> None:
+    p = sub.add_parser("sensors", help="list sensor presets, or print one as YAML")
+    p.add_argument("name", nargs="?", help="preset to print")
+    p.set_defaults(func=cmd_sensors)
+
+
+def cmd_sensors(args) -> int:
+    if args.name:
+        print(load_sensor(args.name).to_yaml(), end="")
+        return 0
+    for name in preset_names():
+        m = load_sensor(name)
+        print(
+            f"{name:8s} {m.rings:3d} rings  phi {m.azimuth_step_deg:.4f} deg  "
+            f"{m.rotation_hz:g} Hz  {m.rays_per_sweep:6d} rays/sweep  {m.description}"
+        )
+    return 0
+
+
+# ---------------------------------------------------------------- demo
+def _add_demo(sub) -> None:
+    p = sub.add_parser("demo", help="the README's demo: simulate, run the odometry, plot")
+    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
+    p.add_argument("--frames", type=int, default=30, help="frames to simulate (default 30)")
+    p.set_defaults(func=cmd_demo)
+
+
+def cmd_demo(args) -> int:
+    from tools.demo import run_demo
+
+    run_demo(args.out, frames=args.frames)
+    return 0
+
+
+# ---------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="salo",
+        description="Lidar simulator with known noise, and a Sensor Aware Lidar Odometry test bench.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in (_add_simulate, _add_sensors, _add_demo):
+        add(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    from simlidar.world import WorldError
+
+    try:
+        return int(args.func(args) or 0)
+    except (*USER_ERRORS, WorldError, CommandError) as exc:
+        print(f"salo {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"salo {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
