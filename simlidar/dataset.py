@@ -10,6 +10,8 @@ The simulator's layout (``kind == "salo"``)::
       poses.txt             3x4 row-major T_first_lidar per frame (line 0 is identity)
       times.txt             sweep start time per frame, s (first is 0)
       sensor.yaml           the sensor model (simlidar.sensor keys)
+      degeneracy.csv        per frame: eigenvalues of the point-to-plane information from the
+                            returns' true normals (``simlidar.degeneracy``)
       manifest.json         written last: parameters, versions, frame count, sha256 per file
 
 A sequence is written in a hidden sibling folder holding an ``INCOMPLETE``
@@ -34,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, se3
+from .degeneracy import CSV_HEADER, csv_row, degeneracy
 from .sensor import LidarModel, SensorError, load_sensor, load_sensor_file
 
 FORMAT_NAME = "salo-sequence"
@@ -256,6 +259,7 @@ class SequenceWriter:
         self._poses: list[np.ndarray] = []
         self._times: list[float] = []
         self._checksums: dict[str, str] = {}
+        self._degeneracy_rows: list[str] = []
         self._points = 0
 
     def __enter__(self) -> SequenceWriter:
@@ -286,6 +290,7 @@ class SequenceWriter:
         self._poses.append(np.asarray(T_world_lidar, dtype=float))
         self._times.append(float(time_s))
         self._points += len(scan.xyz)
+        self._degeneracy_rows.append(csv_row(k, degeneracy(scan.true_xyz, scan.normal)))
 
     def _commit(self) -> None:
         if not self._poses:
@@ -298,6 +303,7 @@ class SequenceWriter:
             "poses.txt": format_kitti_poses(rel),
             "times.txt": "".join(f"{t - self._times[0]:.9e}\n" for t in self._times),
             "sensor.yaml": self.sensor.to_yaml(),
+            "degeneracy.csv": CSV_HEADER + "\n" + "".join(r + "\n" for r in self._degeneracy_rows),
         }
         for fname, text in texts.items():
             (self.tmp / fname).write_text(text)
