@@ -132,10 +132,12 @@ def read_kitti_calib_tr(path: str | Path) -> np.ndarray:
 def camera_poses_to_lidar(poses_cam: np.ndarray, Tr_cam_velo: np.ndarray) -> np.ndarray:
     """KITTI ground truth (cam0 poses in the first cam0 frame) -> lidar poses, first = identity.
 
-    ``L_i = Tr^-1 P_i Tr``, then ``L_0^-1 L_i``.
+    ``L_i = Tr^-1 P_i Tr``, then ``L_0^-1 L_i``. KITTI's numbers carry 7 significant
+    digits, so their rotations are orthonormal only to ~1e-7: general matrix
+    inverses are used, not the rigid-transform shortcut.
     """
-    L = se3.inverse(Tr_cam_velo) @ poses_cam @ Tr_cam_velo
-    return se3.inverse(L[0]) @ L
+    L = np.linalg.inv(Tr_cam_velo) @ poses_cam @ Tr_cam_velo
+    return np.linalg.inv(L[0]) @ L
 
 
 def read_bin(path: str | Path) -> np.ndarray:

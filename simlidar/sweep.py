@@ -1,11 +1,16 @@
 """One rotation of a spinning lidar: rays per (ring, column), firing times, motion, noise.
 
-Frames: each ray leaves from the sensor pose at its own firing time (motion
-distortion, on by default). Every returned coordinate, point or normal, is
-expressed in the sensor frame at the sweep's *reference time*, which is the
-sweep's start (time 0 of ``time_s``, the time written to ``times.txt`` and the
-pose written to ``poses.txt``). With motion distortion off, all rays leave from
-the reference pose.
+Frames and motion distortion. The scan's frame is the sensor frame at the
+sweep's *reference time*, its start (time 0 of ``time_s``, the time written to
+``times.txt``, the pose written to ``poses.txt``). Each ray leaves from the
+sensor pose at its own firing time (on by default), and the point is reported
+the way a real sensor reports it: measured range along the beam in the sensor
+frame *at the firing instant*, with no compensation. When the sensor moves, the
+scan is therefore distorted with respect to its reference frame by the motion
+since the sweep start; that is what de-skewing corrects. The ground truth is
+undistorted: ``true_xyz`` and ``normal`` give where each return really is, and
+its surface normal, in the reference frame. With motion distortion off, all
+rays leave from the reference pose and the two frames coincide.
 
 Noise model per return: measured range = true range + ring bias (fixed per
 laser, optional) + N(0, range_noise_std_m^2); the point is placed along the
@@ -48,13 +53,15 @@ SIDECAR_DTYPE = np.dtype(
 class Scan:
     """The returns of one sweep, ordered by firing (column, then ring).
 
-    xyz: (N, 3) float64 measured points, sensor frame at the reference time, metres.
+    xyz: (N, 3) float64 measured points as the sensor reports them (sensor frame at each
+        point's firing time; distorted when the sensor moves), metres.
     intensity: (N,) float32 in [0, 1].
     ring: (N,) int, 0 = lowest beam.  azimuth_index: (N,) int column index.
     time_s: (N,) float64 firing time since the sweep start, seconds.
     range_m: (N,) measured range; true_range_m: (N,) noise-free range, metres.
-    true_xyz: (N, 3) noise-free hit point, same frame as ``xyz``.
-    normal: (N, 3) unit surface normal of the hit triangle, same frame, facing the sensor.
+    true_xyz: (N, 3) noise-free hit point in the reference frame (undistorted), metres.
+    normal: (N, 3) unit surface normal of the hit triangle in the reference frame,
+        facing the sensor.
     object_id: (N,) int32 id of the hit object.
     """
 
@@ -200,7 +207,7 @@ class SweepSimulator:
 
         o = origin_rel if len(origin_rel) == 1 else origin_rel[idx]
         d = dir_rel[idx]
-        xyz = o + measured[:, None] * d
+        xyz = measured[:, None] * dir_local[idx]  # as reported: firing-time sensor frame
         true_xyz = o + true_range[:, None] * d
         normal = hits.normal[idx] @ R_ref  # world -> reference sensor frame
         obj = self.world.face_object_id[hits.face[idx]]

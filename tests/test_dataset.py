@@ -1,0 +1,252 @@
+"""Sequence files: write/read round trip, real KITTI and scan folders, determinism, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers import box_room, constant_velocity
+
+from simlidar import se3
+from simlidar.dataset import (
+    DatasetError,
+    camera_poses_to_lidar,
+    format_kitti_poses,
+    open_sequence,
+    read_kitti_poses,
+    write_ply_scan,
+)
+from simlidar.sensor import load_preset
+from simlidar.simulate import simulate_sequence
+from simlidar.sweep import SweepSimulator
+from simlidar.world import save_world_ply
+from tools.cli import main as salo
+
+
+def simulate(out, frames=4, seed=1, force=False, sensor="vlp16", **kw):
+    traj = constant_velocity(v=(3.0, 0.5, 0.0), yaw_rate=0.2, start=(-5.0, 0.0, 0.0))
+    return simulate_sequence(
+        box_room(), traj, load_preset(sensor), out, frames=frames, seed=seed, force=force, **kw
+    )
+
+
+def test_round_trip(tmp_path):
+    out = tmp_path / "seq"
+    frames = []
+    simulate(out, on_frame=lambda k, scan: frames.append(scan))
+    seq = open_sequence(out)
+    assert seq.kind == "salo" and len(seq) == 4
+    assert seq.sensor == load_preset("vlp16")
+    seq.verify()
+    for k, frame in enumerate(seq):
+        scan = frames[k]
+        assert np.allclose(frame.points, scan.xyz, atol=1e-5)  # float32 on disk
+        assert np.array_equal(frame.intensity, scan.intensity)
+        assert np.array_equal(frame.ring, scan.ring)
+        assert np.array_equal(frame.field("azimuth_index"), scan.azimuth_index)
+        assert np.array_equal(frame.time_s, scan.time_s)
+        assert np.allclose(frame.field("true_xyz"), scan.true_xyz, atol=1e-5)
+        assert np.allclose(frame.field("normal"), scan.normal, atol=1e-6)
+        assert np.array_equal(frame.field("object_id"), scan.object_id)
+    # poses relative to the first frame, at the sweep start times
+    traj = constant_velocity(v=(3.0, 0.5, 0.0), yaw_rate=0.2, start=(-5.0, 0.0, 0.0))
+    T = traj.pose_at(seq.times)
+    assert np.allclose(seq.poses, se3.inverse(T[0]) @ T, atol=1e-9)
+    assert np.allclose(seq.poses[0], np.eye(4))
+    assert np.allclose(np.diff(seq.times), 0.1)
+    m = seq.manifest
+    assert m["frames"] == 4 and m["seed"] == 1 and m["package_version"]
+    assert set(m["files"]) >= {"poses.txt", "times.txt", "sensor.yaml", "velodyne/000003.bin"}
+    deg = np.loadtxt(out / "degeneracy.csv", delimiter=",", skiprows=1)
+    assert deg.shape == (4, 14)
+
+
+def test_same_arguments_give_byte_identical_files(tmp_path):
+    simulate(tmp_path / "a")
+    simulate(tmp_path / "b")
+    simulate(tmp_path / "c", seed=2)
+    files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
+    assert len(files) > 10
+    for f in files:
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    assert (tmp_path / "a/velodyne/000000.bin").read_bytes() != (tmp_path / "c/velodyne/000000.bin").read_bytes()
+
+
+def test_interrupted_write_leaves_nothing_that_looks_complete(tmp_path):
+    out = tmp_path / "seq"
+
+    def boom(k, scan):
+        if k == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        simulate(out, on_frame=boom)
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []
+    # an existing sequence survives a failed --force rewrite untouched
+    simulate(out)
+    before = (out / "manifest.json").read_bytes()
+    with pytest.raises(KeyboardInterrupt):
+        simulate(out, force=True, seed=9, on_frame=boom)
+    assert (out / "manifest.json").read_bytes() == before
+    open_sequence(out).verify()
+    with pytest.raises(DatasetError, match="already exists"):
+        simulate(out)
+    simulate(out, force=True, seed=9)
+    assert json.loads((out / "manifest.json").read_text())["seed"] == 9
+
+
+def test_unfinished_or_damaged_folders_are_refused(tmp_path):
+    out = tmp_path / "seq"
+    simulate(out)
+    (out / "INCOMPLETE").write_text("")
+    with pytest.raises(DatasetError, match="unfinished"):
+        open_sequence(out)
+    (out / "INCOMPLETE").unlink()
+    (out / "sidecar/000002.npy").unlink()
+    with pytest.raises(DatasetError, match="000002.npy: missing"):
+        open_sequence(out)
+    simulate(tmp_path / "s2")
+    with open(tmp_path / "s2/velodyne/000001.bin", "ab") as fh:
+        fh.write(b"\0" * 5)
+    with pytest.raises(DatasetError, match="000001.bin.*not a whole number"):
+        open_sequence(tmp_path / "s2")[1]
+    with pytest.raises(DatasetError, match="checksum"):
+        open_sequence(tmp_path / "s2").verify()
+
+
+def test_kitti_camera_to_lidar_hand_made():
+    rng = np.random.default_rng(0)
+    Tr = se3.exp(np.r_[rng.normal(0, 0.3, 3), rng.normal(0, 1.0, 3)])  # velodyne -> cam0
+    L = se3.exp(np.c_[rng.normal(0, 5, (5, 3)), rng.normal(0, 0.2, (5, 3))])  # lidar poses
+    P = Tr @ L @ se3.inverse(Tr)  # the same motion seen by the camera
+    P = se3.inverse(P[0]) @ P  # KITTI: first camera pose is identity
+    got = camera_poses_to_lidar(P, Tr)
+    assert np.allclose(got, se3.inverse(L[0]) @ L, atol=1e-12)
+
+
+@pytest.mark.parametrize("seq_id", ["05", "01"])
+def test_real_kitti_sequence(real_data, seq_id):
+    seq = open_sequence(real_data / "kitti/sequences" / seq_id)
+    assert seq.kind == "kitti" and len(seq) == 10
+    expected = read_kitti_poses(real_data / "kitti/lidar_frame_poses" / f"{seq_id}.txt")
+    assert np.abs(seq.poses - expected).max() < 1e-6
+    frame = seq[0]
+    assert frame.points.shape[1] == 3 and len(frame.points) > 100_000
+    assert frame.ring is None and frame.time_s is None
+    assert 0 <= frame.intensity.min() and frame.intensity.max() <= 1.0
+    # explicit pose file gives the same
+    seq2 = open_sequence(real_data / "kitti/sequences" / seq_id, poses=real_data / f"kitti/poses/{seq_id}.txt")
+    assert np.allclose(seq2.poses, seq.poses)
+
+
+def test_real_hdl32_scan_folder(real_data, tmp_path):
+    seq = open_sequence(real_data / "hdl32-pair", sensor="hdl32e")
+    assert seq.kind == "scans" and len(seq) == 2 and seq.sensor.name == "hdl32e"
+    T = np.loadtxt(real_data / "hdl32-pair/T_target_source.txt")
+    assert np.allclose(seq.poses[1], T, atol=1e-6)
+    pts = seq[1].points
+    r = np.linalg.norm(pts, axis=1)
+    assert (r == 0).any() and np.median(r[r > 0]) < 30  # close-range campus scan
+
+
+def test_ply_scan_folder(tmp_path):
+    rng = np.random.default_rng(1)
+    pts = rng.normal(0, 10, (500, 3))
+    for k in range(3):
+        write_ply_scan(
+            tmp_path / f"{k:03d}.ply",
+            pts + k,
+            {"intensity": rng.random(500).astype(np.float32), "ring": np.arange(500, dtype=np.uint16) % 16,
+             "time": np.linspace(0, 0.1, 500).astype(np.float32)},
+        )
+    load_preset("vlp16").save(tmp_path / "sensor.yaml")
+    seq = open_sequence(tmp_path)
+    assert seq.kind == "scans" and len(seq) == 3 and seq.sensor.name == "vlp16"
+    f = seq[2]
+    assert np.allclose(f.points, pts + 2, atol=1e-5)
+    assert np.array_equal(f.ring, np.arange(500) % 16)
+    assert f.time_s is not None and f.intensity is not None
+
+
+def test_malformed_pose_files(tmp_path):
+    p = tmp_path / "poses.txt"
+    p.write_text("1 0 0 0 0 1 0 0 0 0 1\n")
+    with pytest.raises(DatasetError, match=r"poses.txt:1: .*12 numbers.*found 11"):
+        read_kitti_poses(p)
+    p.write_text("1 0 0 0 0 1 0 0 0 0 1 x\n")
+    with pytest.raises(DatasetError, match="poses.txt:1: not a number"):
+        read_kitti_poses(p)
+    p.write_text("2 0 0 0 0 1 0 0 0 0 1 0\n")
+    with pytest.raises(DatasetError, match="not a rotation"):
+        read_kitti_poses(p)
+    with pytest.raises(DatasetError, match="cannot read"):
+        read_kitti_poses(tmp_path / "nope.txt")
+
+
+# ------------------------------------------------------------------ the command line
+def _mesh_and_poses(tmp_path, frames=5):
+    save_world_ply(box_room(), tmp_path / "room.ply")
+    T = np.tile(np.eye(4), (frames, 1, 1))
+    T[:, 0, 3] = np.linspace(-3, 3, frames)
+    (tmp_path / "poses.txt").write_text(format_kitti_poses(T))
+    return tmp_path / "room.ply", tmp_path / "poses.txt"
+
+
+def test_cli_simulate_with_mesh_and_poses(tmp_path):
+    mesh, poses = _mesh_and_poses(tmp_path)
+    out = tmp_path / "seq"
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16",
+                 "--noise-std", "0.01", "--seed", "5", "--out", str(out)]) == 0
+    seq = open_sequence(out)
+    assert len(seq) == 5 and seq.sensor.range_noise_std_m == 0.01
+    assert np.allclose(seq.poses[:, 0, 3], np.linspace(0, 6, 5))
+    assert seq.manifest["mesh"] == str(mesh)
+
+
+def test_cli_bad_input(tmp_path, capsys):
+    mesh, poses = _mesh_and_poses(tmp_path)
+    out = tmp_path / "seq"
+    (tmp_path / "broken.ply").write_text("not a mesh")
+    bad_poses = tmp_path / "bad.txt"
+    bad_poses.write_text("1 0 0\n")
+    import trimesh
+
+    trimesh.creation.box((4, 4, 4)).export(tmp_path / "block.ply")  # sensor at the origin inside it
+    cases = [
+        (["--mesh", str(tmp_path / "broken.ply"), "--poses", str(poses)], "broken.ply"),
+        (["--mesh", str(tmp_path / "missing.ply"), "--poses", str(poses)], "missing.ply: mesh file does not exist"),
+        (["--mesh", str(mesh), "--poses", str(bad_poses)], "bad.txt:1"),
+        (["--mesh", str(tmp_path / "block.ply"), "--poses", str(poses)], "inside geometry"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--sensor", "nope"], "unknown sensor preset 'nope'"),
+    ]
+    for extra, words in cases:
+        code = salo(["simulate", *extra, "--out", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2 and words in err, (extra, err)
+        assert not out.exists()
+        assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--out", str(out)]) == 0
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--out", str(out)]) == 2
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_check_clear_uses_each_frame(tmp_path):
+    # a path that enters a solid block at frame 3 is refused before anything is written
+    import trimesh
+
+    from simlidar.world import World
+
+    b = trimesh.creation.box((2, 2, 2))
+    b.apply_translation((6, 0, 0))
+    room = box_room()
+    world = World(np.vstack([room.vertices, b.vertices]), np.vstack([room.faces, b.faces + len(room.vertices)]),
+                  np.r_[np.zeros(len(room.faces)), np.ones(12)], ["wall", "building"])
+    traj = constant_velocity(v=(20.0, 0, 0))
+    from simlidar.sweep import SensorInsideGeometry
+
+    with pytest.raises(SensorInsideGeometry, match="frame 3"):
+        simulate_sequence(world, traj, load_preset("vlp16"), tmp_path / "s", frames=5)
+    assert list(tmp_path.iterdir()) == []
+    assert SweepSimulator  # imported for the error type's module
