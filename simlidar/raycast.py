@@ -39,6 +39,28 @@ class RayHits:
         return self.face >= 0
 
 
+@dataclass
+class CompactHits:
+    """The rays of a batch that hit something (m of n), float64 geometry.
+
+    ray: (m,) int64 index of the ray in the batch.
+    face: (m,) int64 hit triangle.
+    distance: (m,) float64 metres along the ray.
+    cos_incidence: (m,) float64 signed d . n_face (positive: the back side was hit).
+    normal: (m, 3) float64 unit normal of the hit triangle, turned towards the ray origin.
+    """
+
+    ray: np.ndarray
+    face: np.ndarray
+    distance: np.ndarray
+    cos_incidence: np.ndarray
+    normal: np.ndarray
+
+    def select(self, mask: np.ndarray) -> CompactHits:
+        return CompactHits(self.ray[mask], self.face[mask], self.distance[mask],
+                           self.cos_incidence[mask], self.normal[mask])
+
+
 class Raycaster:
     """An Embree BVH over one triangle mesh.
 
@@ -68,7 +90,7 @@ class Raycaster:
         cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         norm = np.linalg.norm(cross, axis=1, keepdims=True)
         self._face_normal = np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0)
-        self._face_point = tri[:, 0]
+        self._face_offset = np.einsum("ij,ij->i", self._face_normal, tri[:, 0])  # n . v0
         self.n_faces = len(faces)
         self.threads = max(1, threads or os.cpu_count() or 1)
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
@@ -79,66 +101,78 @@ class Raycaster:
         origins32, directions32: (n, 3) float32, already shifted by ``self.offset``.
         max_distance: (n,) float32.
         """
-        n = len(origins32)
-        if self._pool is None or n < 4096:
-            out = self._scene.run(origins32, directions32, dists=max_distance, output=1)
-            return out["primID"], out["tfar"]
-        bounds = np.linspace(0, n, self.threads + 1).astype(int)
+        bounds = np.linspace(0, len(origins32), self.threads + 1).astype(int)
 
         def run(k: int):
             a, b = bounds[k], bounds[k + 1]
-            return self._scene.run(
-                origins32[a:b], directions32[a:b], dists=max_distance[a:b], output=1
-            )
+            return self._scene.run(origins32[a:b], directions32[a:b], dists=max_distance[a:b], output=1)
 
-        parts = list(self._pool.map(run, range(self.threads)))
+        parts = self.map(run, list(range(self.threads)))
         return (
             np.concatenate([p["primID"] for p in parts]),
             np.concatenate([p["tfar"] for p in parts]),
         )
 
-    def cast(
-        self, origins: np.ndarray, directions: np.ndarray, max_distance: float | np.ndarray
-    ) -> RayHits:
-        """Cast rays and return the first hit of each.
+    def cast_compact(
+        self, origins_local: np.ndarray, directions: np.ndarray, max_distance: float
+    ) -> CompactHits:
+        """Cast rays in the BVH's local frame (world minus ``self.offset``), one thread.
+
+        origins_local: (n, 3) float64; directions: (n, 3) float64 unit vectors.
+        Embree picks the triangle; the distance is then solved in float64 against
+        the triangle's plane, so it is exact to float64 for the given ray.
+        """
+        n = len(directions)
+        o32 = np.ascontiguousarray(origins_local, dtype=np.float32)
+        d32 = np.ascontiguousarray(directions, dtype=np.float32)
+        # Embree's distance is float32: leave a margin and cut exactly in float64 below.
+        limit32 = np.full(n, max_distance * (1 + 1e-5) + 1e-3, dtype=np.float32)
+        out = self._scene.run(o32, d32, dists=limit32, output=1)
+        ray = np.flatnonzero(out["primID"] >= 0)
+        face = out["primID"][ray].astype(np.int64)
+        n_f = self._face_normal[face]
+        denom = np.einsum("ij,ij->i", directions[ray], n_f)
+        num = self._face_offset[face] - np.einsum("ij,ij->i", origins_local[ray], n_f)
+        grazing = np.abs(denom) < 1e-9
+        t = np.where(grazing, out["tfar"][ray], num / np.where(grazing, 1.0, denom))
+        n_f *= -np.sign(denom)[:, None]  # face the ray origin
+        hits = CompactHits(ray, face, t, denom, n_f)
+        return hits if t.max(initial=0.0) <= max_distance else hits.select(t <= max_distance)
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, max_distance: float) -> RayHits:
+        """Cast rays (world frame) and return the first hit of each, per ray.
 
         origins: (n, 3) or (3,) float64 world coordinates, metres.
         directions: (n, 3) float64 unit vectors.
-        max_distance: scalar or (n,) metres; hits beyond it are misses.
+        max_distance: metres; hits beyond it are misses.
         """
         directions = np.asarray(directions, dtype=np.float64)
         n = len(directions)
-        local_origins = np.broadcast_to(np.asarray(origins, dtype=np.float64) - self.offset, (n, 3))
-        o32 = np.ascontiguousarray(local_origins, dtype=np.float32)
-        d32 = np.ascontiguousarray(directions, dtype=np.float32)
-        # Embree's own distance is float32; leave margin and cut exactly in float64 below.
-        limit = np.broadcast_to(np.asarray(max_distance, dtype=np.float64), (n,))
-        dist32 = (limit * (1 + 1e-5) + 1e-3).astype(np.float32)
-        face, tfar = self.cast_raw(o32, d32, dist32)
-        face = face.astype(np.int64)
-        hit = face >= 0
-        idx = np.flatnonzero(hit)
-        f = face[idx]
-        n_f = self._face_normal[f]
-        o = local_origins[idx]
-        d = directions[idx]
-        denom = np.einsum("ij,ij->i", d, n_f)
-        num = np.einsum("ij,ij->i", self._face_point[f] - o, n_f)
-        grazing = np.abs(denom) < 1e-9
-        t = np.where(grazing, tfar[idx].astype(np.float64), num / np.where(grazing, 1.0, denom))
+        local = np.broadcast_to(np.asarray(origins, dtype=np.float64) - self.offset, (n, 3))
+        bounds = np.linspace(0, n, self.threads + 1).astype(int)
+        chunks = [(bounds[k], bounds[k + 1]) for k in range(self.threads)]
+        parts = self.map(
+            lambda ab: self.cast_compact(local[ab[0]: ab[1]], directions[ab[0]: ab[1]], max_distance),
+            chunks,
+        )
         distance = np.full(n, np.inf)
-        distance[idx] = t
-        beyond = distance > limit
-        face[beyond] = -1
-        distance[beyond] = np.inf
+        face = np.full(n, -1, dtype=np.int64)
         normal = np.zeros((n, 3))
         back = np.zeros(n, dtype=bool)
-        # Winding normal points "outside"; a ray hitting it from behind has d.n > 0.
-        back[idx] = denom > 0
-        normal[idx] = np.where(back[idx, None], -n_f, n_f)
-        normal[beyond] = 0.0
-        back[beyond] = False
+        for (a, _), h in zip(chunks, parts, strict=True):
+            idx = h.ray + a
+            distance[idx] = h.distance
+            face[idx] = h.face
+            normal[idx] = h.normal
+            # The winding normal points "outside"; a ray hitting it from behind has d.n > 0.
+            back[idx] = h.cos_incidence > 0
         return RayHits(distance=distance, face=face, normal=normal, back_face=back)
+
+    def map(self, fn, items: list) -> list:
+        """Run ``fn`` over items on the worker threads (Embree and numpy release the GIL)."""
+        if self._pool is None or len(items) < 2:
+            return [fn(it) for it in items]
+        return list(self._pool.map(fn, items))
 
     def close(self) -> None:
         if self._pool is not None:

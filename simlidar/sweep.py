@@ -29,11 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import se3
 from .raycast import Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
 from .world import World
+
+# Column blocks a sweep is cut into (fixed, so results do not depend on the core count).
+N_BLOCKS = 8
 
 SIDECAR_DTYPE = np.dtype(
     [
@@ -167,62 +169,86 @@ class SweepSimulator:
     def sweep(self, trajectory: Trajectory, t0: float, frame_index: int = 0) -> Scan:
         """Simulate the sweep that starts at time ``t0`` (s) along ``trajectory``.
 
-        The noise of frame ``frame_index`` is drawn from its own generator seeded
-        with (seed, frame_index), so frames are reproducible in any order.
+        The sweep is cut into a fixed number of column blocks processed on the
+        raycaster's threads; block ``k`` of frame ``frame_index`` draws its noise
+        from its own generator seeded with (seed, frame_index, k), so results are
+        reproducible in any order and on any number of cores.
         """
-        s = self.sensor
-        rng = np.random.default_rng([self.seed, 1, int(frame_index)])
         T_ref = trajectory.pose_at(np.array([t0]))[0]
-        dir_local = self._dir_local
+        T_fire = trajectory.pose_at(t0 + self._times_unique) if self.motion_distortion else None
+        cols = np.linspace(0, self.sensor.columns_per_sweep, N_BLOCKS + 1).astype(int)
+        blocks = [(k, cols[k] * self.sensor.rings, cols[k + 1] * self.sensor.rings) for k in range(N_BLOCKS)]
+        cast = self.raycaster.map(lambda blk: self._cast_block(*blk, T_ref, T_fire, frame_index), blocks)
+        # Fill preallocated outputs block by block (no concatenation pass).
+        sizes = [len(c["measured"]) for c in cast]
+        offsets = np.concatenate([[0], np.cumsum(sizes)])
+        n = int(offsets[-1])
+        out = Scan(
+            xyz=np.empty((n, 3)), intensity=np.empty(n, np.float32), ring=np.empty(n, np.int64),
+            azimuth_index=np.empty(n, np.int64), time_s=np.empty(n), range_m=np.empty(n),
+            true_range_m=np.empty(n), true_xyz=np.empty((n, 3)), normal=np.empty((n, 3)),
+            object_id=np.empty(n, np.int32),
+        )
+        jobs = list(zip(cast, offsets[:-1], strict=True))
+        self.raycaster.map(lambda job: self._fill_block(job[0], out, job[1], T_ref), jobs)
+        return out
+
+    def _cast_block(self, k, a, b, T_ref, T_fire, frame_index) -> dict:
+        """Cast rays a:b of the sweep and draw their noise; returns the block's state."""
+        s, rc = self.sensor, self.raycaster
+        rng = np.random.default_rng([self.seed, 1, int(frame_index), k])
+        dir_local = self._dir_local[a:b]
         if s.angular_jitter_deg > 0:
             jit = np.radians(s.angular_jitter_deg)
+            ring, col = self.ray_ring[a:b], self.ray_column[a:b]
             dir_local = self._directions(
-                s.elevation_rad[self.ray_ring] + rng.normal(0, jit, len(self.ray_ring)),
-                s.column_azimuth_rad(self.ray_column)
-                + s.ring_azimuth_offset_rad[self.ray_ring]
-                + rng.normal(0, jit, len(self.ray_ring)),
+                s.elevation_rad[ring] + rng.normal(0, jit, b - a),
+                s.column_azimuth_rad(col) + s.ring_azimuth_offset_rad[ring] + rng.normal(0, jit, b - a),
             )
-        if self.motion_distortion:
-            T_world = trajectory.pose_at(t0 + self._times_unique)
-            T_rel = se3.inverse(T_ref) @ T_world  # firing pose in the reference frame
-            R_rel = T_rel[self._ray_time_idx, :3, :3]
-            origin_rel = T_rel[self._ray_time_idx, :3, 3]
-            dir_rel = np.einsum("nij,nj->ni", R_rel, dir_local)
+        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset  # BVH-local frame
+        if T_fire is None:
+            d_world = dir_local @ R_ref.T
+            o_world = np.broadcast_to(t_ref, (b - a, 3))
+        elif s.laser_interval_s == 0:
+            # One pose per column: rotate each column's beams with one batched matmul.
+            c0, c1 = a // s.rings, b // s.rings
+            R = T_fire[c0:c1, :3, :3]
+            d_world = np.matmul(dir_local.reshape(c1 - c0, s.rings, 3), R.transpose(0, 2, 1)).reshape(-1, 3)
+            o_world = np.repeat(T_fire[c0:c1, :3, 3] - rc.offset, s.rings, axis=0)
         else:
-            origin_rel = np.zeros((1, 3))
-            dir_rel = dir_local
-        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3]
-        origins_world = origin_rel @ R_ref.T + t_ref
-        dirs_world = dir_rel @ R_ref.T
-        hits = self.raycaster.cast(origins_world, dirs_world, s.max_range_m + 1.0)
+            ti = self._ray_time_idx[a:b]
+            d_world = np.einsum("nij,nj->ni", T_fire[ti, :3, :3], dir_local)
+            o_world = T_fire[ti, :3, 3] - rc.offset
+        hits = rc.cast_compact(o_world, d_world, s.max_range_m + 1.0)
 
-        idx = np.flatnonzero(hits.hit)
-        true_range = hits.distance[idx]
-        ring = self.ray_ring[idx]
-        measured = true_range + self.ring_bias_m[ring] + rng.normal(0.0, 1.0, len(idx)) * s.range_noise_std_m
+        ring = self.ray_ring[a + hits.ray]
+        noise = rng.standard_normal(len(ring)) * s.range_noise_std_m
+        measured = hits.distance + self.ring_bias_m[ring] + noise
         keep = (measured >= s.min_range_m) & (measured <= s.max_range_m)
         if s.dropout_probability > 0:
-            keep &= rng.random(len(idx)) >= s.dropout_probability
-        idx, true_range, measured, ring = idx[keep], true_range[keep], measured[keep], ring[keep]
+            keep &= rng.random(len(ring)) >= s.dropout_probability
+        if not keep.all():
+            hits, ring, measured = hits.select(keep), ring[keep], measured[keep]
+        return {"a": a, "hits": hits, "ring": ring, "measured": measured,
+                "dir_local": dir_local, "o_world": o_world, "d_world": d_world}
 
-        o = origin_rel if len(origin_rel) == 1 else origin_rel[idx]
-        d = dir_rel[idx]
-        xyz = measured[:, None] * dir_local[idx]  # as reported: firing-time sensor frame
-        true_xyz = o + true_range[:, None] * d
-        normal = hits.normal[idx] @ R_ref  # world -> reference sensor frame
-        obj = self.world.face_object_id[hits.face[idx]]
-        cos_inc = np.abs(np.einsum("ij,ij->i", normal, d))
+    def _fill_block(self, c: dict, out: Scan, off: int, T_ref: np.ndarray) -> None:
+        """Write one block's returns into rows off:off+m of the preallocated scan."""
+        s, rc = self.sensor, self.raycaster
+        hits, measured, ray = c["hits"], c["measured"], c["hits"].ray
+        sl = slice(off, off + len(ray))
+        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset
+        g = c["a"] + ray
+        np.multiply(measured[:, None], c["dir_local"][ray], out=out.xyz[sl])  # as the sensor reports
+        hit_world = c["o_world"][ray] + hits.distance[:, None] * c["d_world"][ray]
+        np.matmul(hit_world - t_ref, R_ref, out=out.true_xyz[sl])  # world -> reference frame
+        np.matmul(hits.normal, R_ref, out=out.normal[sl])
+        obj = self.world.face_object_id[hits.face]
         falloff = np.minimum(1.0, (s.intensity_range_ref_m / np.maximum(measured, 1e-6)) ** 2)
-        intensity = (self._reflectance[obj] * cos_inc * falloff).astype(np.float32)
-        return Scan(
-            xyz=xyz,
-            intensity=intensity,
-            ring=ring,
-            azimuth_index=self.ray_column[idx],
-            time_s=self.ray_time_s[idx],
-            range_m=measured,
-            true_range_m=true_range,
-            true_xyz=true_xyz,
-            normal=normal,
-            object_id=obj,
-        )
+        out.intensity[sl] = self._reflectance[obj] * np.abs(hits.cos_incidence) * falloff
+        out.ring[sl] = c["ring"]
+        out.azimuth_index[sl] = self.ray_column[g]
+        out.time_s[sl] = self.ray_time_s[g]
+        out.range_m[sl] = measured
+        out.true_range_m[sl] = hits.distance
+        out.object_id[sl] = obj

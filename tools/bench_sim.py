@@ -1,0 +1,145 @@
+"""Benchmark of the simulator: sweep speed against the bare Embree call, and streaming memory.
+
+    python -m tools.bench_sim                 # sweep speed, salo32, >= 100k-triangle world
+    python -m tools.bench_sim --memory 1000   # also a 1000-frame sequence: peak RSS stays flat
+
+Prints figures; it asserts nothing (speed is measured here, never in tests).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from simlidar.sensor import load_sensor
+from simlidar.simulate import simulate_sequence
+from simlidar.sweep import SweepSimulator
+from simlidar.trajectory import SampledTrajectory
+from simlidar.world import World
+
+
+def bench_world(seed: int = 0) -> World:
+    """A deterministic street-like world of >= 100k triangles: terrain, blocks, round objects."""
+    rng = np.random.default_rng(seed)
+    n = 160
+    xs = np.linspace(-300, 300, n)
+    gx, gy = np.meshgrid(xs, xs)
+    gz = 0.3 * np.sin(gx / 37.0) * np.cos(gy / 53.0)
+    verts = [np.c_[gx.ravel(), gy.ravel(), gz.ravel()]]
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    faces = [np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]]
+    ids = [np.zeros(len(faces[0]), dtype=int)]
+    labels = ["ground"]
+    base = len(verts[0])
+    parts = []
+    for _ in range(300):  # buildings along both sides of streets every 60 m
+        x, y = rng.uniform(-250, 250, 2)
+        if min(abs(x) % 60, abs(y) % 60) < 12:
+            continue
+        b = trimesh.creation.box((rng.uniform(8, 25), rng.uniform(8, 25), rng.uniform(6, 30)))
+        b.apply_translation((x, y, b.extents[2] / 2))
+        parts.append((b, "building"))
+    for _ in range(50):  # trees / poles as tessellated spheres
+        s = trimesh.creation.icosphere(subdivisions=3, radius=rng.uniform(1, 3))
+        s.apply_translation((rng.uniform(-250, 250), rng.uniform(-250, 250), 4))
+        parts.append((s, "vegetation"))
+    for k, (m, label) in enumerate(parts, start=1):
+        verts.append(m.vertices)
+        faces.append(m.faces + base)
+        ids.append(np.full(len(m.faces), k))
+        labels.append(label)
+        base += len(m.vertices)
+    return World(np.vstack(verts), np.vstack(faces), np.concatenate(ids), labels, "bench world")
+
+
+def straight_path(speed: float = 10.0, duration: float = 200.0) -> SampledTrajectory:
+    t = np.linspace(0, duration, 2001)
+    T = np.tile(np.eye(4), (len(t), 1, 1))
+    # along the street y = 0 (kept free of buildings), back and forth within the world
+    x = -240 + (speed * t) % 480
+    T[:, 0, 3], T[:, 2, 3] = x, 1.9 + 0.3 * np.sin(x / 37.0)
+    return SampledTrajectory(t, T)
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
+    sensor = load_sensor(sensor_name)
+    traj = straight_path()
+    sim = SweepSimulator(world, sensor, seed=0)
+    rc = sim.raycaster
+    sim.sweep(traj, 0.0)  # warm up
+    t = time.perf_counter()
+    returns = 0
+    for k in range(repeats):
+        returns += len(sim.sweep(traj, 0.1 * k, frame_index=k))
+    t_sweep = (time.perf_counter() - t) / repeats
+
+    # the same rays handed to Embree directly (no pose, noise, normal or packing work)
+    T = traj.pose_at(np.array([0.0]))[0]
+    o32 = np.ascontiguousarray(np.broadcast_to(T[:3, 3] - rc.offset, (sensor.rays_per_sweep, 3)), np.float32)
+    d32 = np.ascontiguousarray(sim._dir_local @ T[:3, :3].T, np.float32)
+    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
+    t = time.perf_counter()
+    for _ in range(repeats):
+        rc._scene.run(o32, d32, dists=dist, output=1)
+    t_bare1 = (time.perf_counter() - t) / repeats
+    t = time.perf_counter()
+    for _ in range(repeats):
+        rc.cast_raw(o32, d32, dist)
+    t_bare = (time.perf_counter() - t) / repeats
+    rays = sensor.rays_per_sweep
+    print(f"sensor {sensor.name}: {rays} rays per sweep, {returns / repeats:.0f} returns per sweep")
+    print(f"  full sweep (motion, noise, normals): {1 / t_sweep:6.1f} sweeps/s  {rays / t_sweep / 1e6:5.2f} M rays/s")
+    print(f"  bare embreex, {rc.threads} threads:       {1 / t_bare:6.1f} sweeps/s  {rays / t_bare / 1e6:5.2f} M rays/s")
+    print(f"  bare embreex, 1 thread:          {1 / t_bare1:6.1f} sweeps/s  {rays / t_bare1 / 1e6:5.2f} M rays/s")
+    print(f"  sweep time / bare cast ({rc.threads} threads): {t_sweep / t_bare:.2f}x")
+    print(f"  sweep time / bare cast (1 thread):  {t_sweep / t_bare1:.2f}x")
+
+
+def bench_memory(world: World, sensor_name: str, frames: int) -> None:
+    sensor = load_sensor(sensor_name)
+    rss = {}
+
+    def on_frame(k, scan):
+        if k + 1 in (frames // 10, frames):
+            rss[k + 1] = peak_rss_mb()
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        simulate_sequence(world, straight_path(), sensor, Path(tmp) / "seq", frames=frames, on_frame=on_frame)
+        dt = time.perf_counter() - t
+        size = sum(p.stat().st_size for p in (Path(tmp) / "seq").rglob("*") if p.is_file())
+    a, b = frames // 10, frames
+    print(f"{frames}-frame {sensor.name} sequence: {dt:.0f} s ({frames / dt:.1f} frames/s incl. writing), "
+          f"{size / 1e9:.2f} GB on disk")
+    print(f"  peak RSS after {a} frames: {rss[a]:.0f} MB; after {b} frames: {rss[b]:.0f} MB "
+          f"(ratio {rss[b] / rss[a]:.3f})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sensor", default="salo32")
+    ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--memory", type=int, default=0, help="frames of the streaming-memory run (0: skip)")
+    ap.add_argument("--memory-sensor", default="vlp16")
+    args = ap.parse_args()
+    t = time.perf_counter()
+    world = bench_world()
+    print(f"world: {len(world.faces)} triangles, built in {time.perf_counter() - t:.2f} s")
+    bench_sweep(world, args.sensor, args.repeats)
+    if args.memory:
+        bench_memory(world, args.memory_sensor, args.memory)
+
+
+if __name__ == "__main__":
+    main()
