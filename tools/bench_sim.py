@@ -99,9 +99,12 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
     t_bare = (time.perf_counter() - t) / repeats
     rays = sensor.rays_per_sweep
     print(f"sensor {sensor.name}: {rays} rays per sweep, {returns / repeats:.0f} returns per sweep")
-    print(f"  full sweep (motion, noise, normals): {1 / t_sweep:6.1f} sweeps/s  {rays / t_sweep / 1e6:5.2f} M rays/s")
-    print(f"  bare embreex, {rc.threads} threads:       {1 / t_bare:6.1f} sweeps/s  {rays / t_bare / 1e6:5.2f} M rays/s")
-    print(f"  bare embreex, 1 thread:          {1 / t_bare1:6.1f} sweeps/s  {rays / t_bare1 / 1e6:5.2f} M rays/s")
+    for what, t_ in (
+        ("full sweep (motion, noise, normals)", t_sweep),
+        (f"bare embreex, {rc.threads} threads", t_bare),
+        ("bare embreex, 1 thread", t_bare1),
+    ):
+        print(f"  {what:36s} {1 / t_:6.1f} sweeps/s  {rays / t_ / 1e6:5.2f} M rays/s")
     print(f"  sweep time / bare cast ({rc.threads} threads): {t_sweep / t_bare:.2f}x")
     print(f"  sweep time / bare cast (1 thread):  {t_sweep / t_bare1:.2f}x")
 
