@@ -164,6 +164,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in (_add_simulate, _add_sensors, _add_demo):
         add(sub)
+    from tools import cli_evaluate
+
+    cli_evaluate.add_commands(sub)
     return parser
 
 

@@ -95,7 +95,7 @@ def cmd_evaluate(args) -> int:
         plot_evaluation(args.plot, T_gt, T_est, metrics, plane=args.plane, title=title)
         if not args.json:
             text += f"\nplot: {args.plot}\n"
-    print(text, end="")  # noqa: T201 (the command's output)
+    print(text, end="")
     return 0
 
 
