@@ -1,0 +1,53 @@
+"""Procedural, seeded worlds with drivable paths and smooth 6-DoF lidar trajectories.
+
+Each scene module has a frozen ``Params`` dataclass (fields with defaults and
+help text), a one-line ``DESCRIPTION`` and ``build(params) -> Scene``. This
+package knows nothing of the simulator: it makes a mesh and poses.
+
+    from scenes import build_scene, scene_parameters
+    scene = build_scene("tunnel", seed=3, length_m=600)
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any
+
+from . import city, forest, highway, open_field, tunnel
+from .base import LABELS, MeshBuilder, Scene
+from .params import ParamInfo, describe, resolve
+
+SCENES: dict[str, ModuleType] = {
+    "city": city,
+    "tunnel": tunnel,
+    "highway": highway,
+    "open": open_field,
+    "forest": forest,
+}
+
+
+def _module(name: str) -> ModuleType:
+    try:
+        return SCENES[name]
+    except KeyError:
+        raise ValueError(f"unknown scene {name!r} (known: {', '.join(SCENES)})") from None
+
+
+def scene_parameters(name: str) -> list[ParamInfo]:
+    """The parameters of scene ``name`` with defaults, types, bounds and help text."""
+    return describe(_module(name).Params)
+
+
+def resolve_params(name: str, seed: int = 0, **overrides: Any):
+    """The validated ``Params`` of scene ``name`` (``ValueError`` names a bad parameter)."""
+    return resolve(_module(name).Params, {"seed": seed, **overrides})
+
+
+def build_scene(name: str, seed: int = 0, **overrides: Any) -> Scene:
+    """Build scene ``name`` with ``seed`` and parameter overrides (strings are converted)."""
+    params = resolve_params(name, seed, **overrides)
+    return _module(name).build(params)
+
+
+__all__ = ["LABELS", "SCENES", "MeshBuilder", "ParamInfo", "Scene", "build_scene", "resolve_params",
+           "scene_parameters"]

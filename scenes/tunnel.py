@@ -1,0 +1,279 @@
+"""Tunnel: a long bore under a hill, open road before and after, sparse fittings inside.
+
+The alignment runs straight for ``approach_m``, through the tunnel (straight,
+or a constant-radius curve when ``curve_radius_m`` > 0) and straight again,
+at a constant grade. The bore's lining (box or arched cross-section) faces
+inward; raised walkways line both walls. At each portal a cliff face, cut by
+the bore's outline, rises to a hill that covers the tunnel. Inside, every
+``feature_spacing_m`` a pair of wall lights, on alternate sides an emergency
+cabinet with a sign, and every fourth time a pair of jet fans under the roof:
+otherwise nothing fixes the position along the axis, the degenerate case.
+
+Metadata: ``interior_s`` (path arc length from the first portal to the
+second, m), ``portal_s``, ``axis_xy`` (unit direction at the tunnel's middle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import geometry as g
+from . import paths, props
+from .base import MeshBuilder, Scene, check_budget
+from .params import CommonParams, param
+from .trajectory import PathTrajectory
+
+DESCRIPTION = "long tunnel (box or arched, straight or curved) under a hill, portals, open road both ends"
+
+STEP_M = 0.5  # path sampling
+SLICE_M = 2.0  # length of one ring of the bore's mesh
+
+
+@dataclass(frozen=True)
+class Params(CommonParams):
+    speed_m_s: float = param(15.0, "cruise speed of the vehicle, m/s", min=0.5, max=60.0)
+    length_m: float = param(500.0, "tunnel length portal to portal, m", min=50.0, max=10000.0)
+    approach_m: float = param(80.0, "open road before and after the tunnel, m", min=20.0, max=2000.0)
+    cross_section: str = param("arch", "shape of the bore", choices=("arch", "box"))
+    width_m: float = param(10.5, "bore width wall to wall (two lanes and walkways), m", min=7.0, max=30.0)
+    height_m: float = param(7.0, "clear height at the bore's crown, m", min=4.5, max=20.0)
+    walkway_width_m: float = param(1.0, "raised walkway along each wall, m", min=0.0, max=3.0)
+    curve_radius_m: float = param(0.0, "radius of the tunnel's curve, left turning (0: straight), m",
+                                  min=0.0, max=1e6)
+    grade_pct: float = param(1.0, "road grade, percent (rising)", min=-8.0, max=8.0)
+    feature_spacing_m: float = param(80.0, "spacing of lights/cabinets/fans inside (0: bare bore), m",
+                                     min=0.0, max=10000.0)
+    overburden_m: float = param(25.0, "height of the hill above the road mid-tunnel, m", min=2.0, max=500.0)
+    lane_offset_m: float = param(1.75, "the vehicle drives this far right of the centre-line, m",
+                                 min=0.0, max=5.0)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.curve_radius_m and self.curve_radius_m < 100.0:
+            raise ValueError("parameter curve_radius_m: a road tunnel curve needs a radius >= 100 m (or 0)")
+        if self.lane_offset_m > self.width_m / 2 - self.walkway_width_m - 1.2:
+            raise ValueError(f"parameter lane_offset_m: {self.lane_offset_m} m puts the vehicle on the walkway")
+        if self.overburden_m < self.height_m + 1.0:
+            raise ValueError("parameter overburden_m: must exceed height_m + 1 (the hill covers the bore)")
+        if self.cross_section == "arch" and self.height_m < self.width_m / 2 + 1.0:
+            raise ValueError("parameter height_m: an arch needs height_m >= width_m / 2 + 1")
+
+
+def alignment(length_total: float, start_curve: float, curve_len: float, radius: float,
+              grade: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre-line samples: (n,) arc length, (n, 3) points, (n,) heading, rad.
+
+    Straight, then a left curve of ``radius`` (0: none) over ``curve_len`` m
+    from ``start_curve``, then straight; z rises at ``grade``.
+    """
+    n = int(round(length_total / step)) + 1
+    s = np.linspace(0.0, length_total, n)
+    curv = 1.0 / radius if radius > 0 else 0.0
+    heading = np.clip(s - start_curve, 0.0, curve_len) * curv
+    mid_heading = 0.5 * (heading[1:] + heading[:-1])
+    ds = np.diff(s)
+    xy = np.vstack([[0.0, 0.0], np.cumsum(np.stack([np.cos(mid_heading), np.sin(mid_heading)], 1)
+                                          * ds[:, None], axis=0)])
+    return s, np.column_stack([xy, grade * s]), heading
+
+
+def bore_outline(p: Params) -> np.ndarray:
+    """(k, 2) the lining's cross-section (lateral l, height h), from the left wall's foot
+    over the roof to the right wall's foot (so the swept lining faces the axis)."""
+    half = p.width_m / 2
+    if p.cross_section == "box":
+        return np.array([[half, 0.0], [half, p.height_m], [-half, p.height_m], [-half, 0.0]])
+    wall_top = p.height_m - half
+    phi = np.linspace(0.0, np.pi, 25)
+    arch = np.column_stack([half * np.cos(phi), wall_top + half * np.sin(phi)])
+    return np.vstack([[[half, 0.0]], arch, [[-half, 0.0]]])
+
+
+def build(p: Params) -> Scene:
+    rng = np.random.default_rng([p.seed, 0x7E1])
+    total = 2 * p.approach_m + p.length_m
+    s_in, s_out = p.approach_m, p.approach_m + p.length_m
+    s, centre, heading = alignment(total, s_in, p.length_m, p.curve_radius_m, p.grade_pct / 100, STEP_M)
+    left = np.column_stack([-np.sin(heading), np.cos(heading), np.zeros_like(heading)])
+    mb = MeshBuilder()
+    ground_noise = g.SmoothField(rng, 0.4, (60.0, 250.0))
+    half = p.width_m / 2
+    road_half = half - p.walkway_width_m
+    w_land = 150.0  # lateral extent of the land, m
+
+    def rows(a: float, b: float) -> np.ndarray:
+        """Indices of the alignment samples spanning [a, b] every SLICE_M."""
+        k = int(round(SLICE_M / STEP_M))
+        i0, i1 = int(round(a / STEP_M)), int(round(b / STEP_M))
+        return np.unique(np.concatenate([np.arange(i0, i1, k), [i1]]))
+
+    edge = half + 0.5  # the approach road's edge
+    lat_side = np.geomspace(edge, w_land, 16)  # land beside the road, one side
+
+    def land_height(idx, lv):
+        """(len(idx), len(lv)) land height above the road level: a shallow ditch, then rolling land."""
+        xy = centre[idx, None, :2] + lv[None, :, None] * left[idx, None, :2]
+        off_road = np.clip((np.abs(lv) - edge - 2.0) / 10.0, 0.0, 1.0)
+        ditch = np.clip((np.abs(lv) - edge) / 0.5, 0.0, 1.0) * 0.3
+        return ground_noise(xy[..., 0], xy[..., 1]) * off_road[None, :] - ditch[None, :]
+
+    def hill_height(idx, lv):
+        return np.maximum(land_height(idx, lv), _hill(s[idx], lv, p, s_in, s_out))
+
+    def section(idx, lv, heights):
+        return np.stack([np.broadcast_to(lv, (len(idx), len(lv))), heights], -1)
+
+    # Approach roads and the land beside them.
+    road_obj = mb.new_object("road")
+    land_obj = mb.new_object("ground")
+    for a, b in ((0.0, s_in), (s_out, total)):
+        idx = rows(a, b)
+        mb.add(*g.sweep(centre[idx], left[idx], np.array([[-edge, 0.0], [edge, 0.0]])), road_obj)
+        for side in (-lat_side[::-1], lat_side):
+            mb.add(*g.sweep(centre[idx], left[idx], section(idx, side, land_height(idx, side))), land_obj)
+
+    # The hill over the bore, and the cliff faces at the portals (between the land's and
+    # the bore's outline below, and the hill's section above).
+    idx = rows(s_in, s_out)
+    hill_lat = np.concatenate([-lat_side[::-1], np.linspace(-edge, edge, 5)[1:-1], lat_side])
+    hill_prof = section(idx, hill_lat, hill_height(idx, hill_lat))
+    mb.add(*g.sweep(centre[idx], left[idx], hill_prof), mb.new_object("ground"))
+    outline = bore_outline(p)
+    face_obj = mb.new_object("wall")
+    up = np.array([0.0, 0.0, 1.0])
+    for row, end, toward in ((0, idx[0], -1.0), (-1, idx[-1], 1.0)):
+        one = np.array([end])
+        lower = np.vstack([
+            section(one, -lat_side[::-1], land_height(one, -lat_side[::-1]))[0],
+            outline[::-1],  # right foot, over the roof, left foot
+            section(one, lat_side, land_height(one, lat_side))[0],
+        ])
+        faces = g.stitch_chains(lower, hill_prof[row], np.array([0.0, -5.0]))
+        pts2 = np.vstack([lower, hill_prof[row]])
+        v = centre[end] + pts2[:, :1] * left[end] + pts2[:, 1:2] * up
+        fwd = np.array([np.cos(heading[end]), np.sin(heading[end]), 0.0])
+        mb.add(v, _orient(v, faces, toward * fwd), face_obj)
+
+    # The bore: lining, road, walkways.
+    lining_obj = mb.new_object("wall")
+    mb.add(*g.sweep(centre[idx], left[idx], outline), lining_obj)
+    mb.add(*g.sweep(centre[idx], left[idx], np.array([[-road_half, 0.0], [road_half, 0.0]])), road_obj)
+    if p.walkway_width_m > 0:
+        walk_obj = mb.new_object("sidewalk")
+        wh = 0.25
+        right = np.array([[-half, wh], [-road_half, wh], [-road_half, 0.0]])
+        leftw = np.array([[road_half, 0.0], [road_half, wh], [half, wh]])
+        for prof in (right, leftw):
+            mb.add(*g.sweep(centre[idx], left[idx], prof), walk_obj)
+            for end, toward in ((idx[0], -1.0), (idx[-1], 1.0)):  # end caps at the portals
+                lo, hi = prof[:, 0].min(), prof[:, 0].max()
+                quad = np.array([[lo, 0.0], [hi, 0.0], [hi, wh], [lo, wh]])
+                v = centre[end] + quad[:, :1] * left[end] + quad[:, 1:2] * np.array([0.0, 0.0, 1.0])
+                fwd = np.array([np.cos(heading[end]), np.sin(heading[end]), 0.0])
+                mb.add(v, _orient(v, np.array([[0, 1, 2], [0, 2, 3]]), toward * fwd), walk_obj)
+
+    n_features = _fittings(mb, p, rng, s, centre, left, heading, s_in, s_out)
+    _approach_furniture(mb, p, rng, s, centre, left, heading, s_in, s_out)
+
+    # The path: the right lane, offset from the centre-line.
+    lane = centre[:, :2] - p.lane_offset_m * left[:, :2]
+    lane = paths.smooth(lane, 1.0, STEP_M, closed=False)
+    path = np.column_stack([lane, centre[:, 2]])
+    traj = PathTrajectory(
+        path, False, p.speed_m_s, p.accel_m_s2, p.lateral_accel_m_s2, p.mount_height_m,
+        np.radians(p.suspension_pitch_deg), p.suspension_heave_m, p.seed,
+    )
+    s_path = paths.arc_length(path[:, :2])
+    i_in, i_out = int(round(s_in / STEP_M)), int(round(s_out / STEP_M))
+    i_mid = (i_in + i_out) // 2
+    check_budget(mb.n_faces, p.max_triangles)
+    v, f, ids, labels = mb.arrays()
+    return Scene(
+        "tunnel", v, f, ids, labels, path, traj, p.to_dict(),
+        {
+            "portal_s": [float(s_path[i_in]), float(s_path[i_out])],
+            "interior_s": [float(s_path[i_in]), float(s_path[i_out])],
+            "axis_xy": [float(np.cos(heading[i_mid])), float(np.sin(heading[i_mid]))],
+            "path_length_m": float(s_path[-1]),
+            "fittings": n_features,
+        },
+    )
+
+
+def _orient(v: np.ndarray, faces: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """Flip ``faces`` if their summed normal points against ``direction`` (3,)."""
+    tri = v[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).sum(axis=0)
+    return faces if n @ direction >= 0 else faces[:, ::-1].copy()
+
+
+def _hill(s: np.ndarray, lv: np.ndarray, p: Params, s_in: float, s_out: float) -> np.ndarray:
+    """(len(s), len(lv)) height of the hill above the road level; -inf off the hill.
+
+    At each portal a headwall 2 m above the bore's crown with steep cut slopes
+    beside it; over 60 m the crest rises to ``overburden_m`` and the flanks widen
+    to 90 m, a hill the bore runs under.
+    """
+    ramp = np.clip(np.minimum(s - s_in, s_out - s) / 60.0, 0.0, 1.0)
+    smooth = 3 * ramp**2 - 2 * ramp**3
+    crest = p.height_m + 2.0 + (p.overburden_m - p.height_m - 2.0) * smooth
+    flank = 15.0 + 75.0 * smooth  # width of the hill's side slope, m
+    inside = (s >= s_in - 1e-6) & (s <= s_out + 1e-6)
+    core = p.width_m / 2 + 4.0
+    t = np.clip((np.abs(lv)[None, :] - core) / flank[:, None], 0.0, 1.0)
+    h = crest[:, None] * 0.5 * (1 + np.cos(np.pi * t))  # full over the bore, 0 beyond the flank
+    return np.where(inside[:, None], h, -np.inf)
+
+
+def _fittings(mb, p, rng, s, centre, left, heading, s_in, s_out) -> int:
+    """Lights, emergency cabinets with signs, and jet fans along the bore; returns how many."""
+    if p.feature_spacing_m <= 0:
+        return 0
+    half = p.width_m / 2
+    up = np.array([0.0, 0.0, 1.0])
+    wall_h = p.height_m if p.cross_section == "box" else p.height_m - half
+    count = 0
+    for k, sf in enumerate(np.arange(s_in + p.feature_spacing_m / 2, s_out - 5.0, p.feature_spacing_m)):
+        i = int(round(sf / STEP_M))
+        c, lv, yaw = centre[i], left[i], heading[i]
+        light_h = min(wall_h - 0.3, 4.5)
+        for side in (-1.0, 1.0):
+            q = c + side * (half - 0.1) * lv + light_h * up
+            mb.add_object(*g.box((1.2, 0.12, 0.15), q, yaw), "light")
+        # An emergency cabinet, nearly flush with the wall, and its sign; alternate walls.
+        side = 1.0 if k % 2 else -1.0
+        q = c + side * (half - 0.06) * lv
+        mb.add_object(*g.box((1.5, 0.12, 2.0), q + 1.25 * up, yaw), "object")
+        mb.add_object(*g.box((0.8, 0.05, 0.5), q + 2.8 * up - side * 0.05 * lv, yaw), "sign")
+        if k % 4 == 1:  # a pair of jet fans hung 0.2 m under the roof
+            fan_lat, fan_r = 2.2, 0.6
+            edge = fan_lat + fan_r
+            roof = p.height_m if p.cross_section == "box" else wall_h + np.sqrt(half**2 - edge**2)
+            fan_h = roof - 0.2 - fan_r
+            for lat in (-fan_lat, fan_lat):
+                fan = g.cylinder(fan_r, 4.0, sections=12)
+                v = fan[0] - np.array([0.0, 0.0, 2.0])
+                v = np.stack([v[:, 2], v[:, 1], -v[:, 0]], axis=1)  # axis along x
+                mb.add_object(*g.place((v, fan[1]), yaw, c + lat * lv + fan_h * up), "object")
+        count += 1
+    return count
+
+
+def _approach_furniture(mb, p, rng, s, centre, left, heading, s_in, s_out) -> None:
+    """Signs announcing the tunnel and a few lamp posts on the approaches."""
+    half = p.width_m / 2
+    for s_sign, toward in ((s_in - 40.0, 1.0), (s_out + 40.0, -1.0)):
+        i = int(round(np.clip(s_sign, 0, s[-1]) / STEP_M))
+        for side in (-1.0, 1.0):
+            q = centre[i] + side * (half + 2.0) * left[i]
+            post, plate = props.sign(2.8, (0.05, 1.2, 0.9))
+            yaw = heading[i] + (np.pi if toward > 0 else 0.0)
+            mb.add_object(*g.place(post, yaw, q), "pole")
+            mb.add_object(*g.place(plate, yaw, q), "sign")
+    for a, b in ((0.0, s_in - 10.0), (s_out + 10.0, s[-1])):
+        for sl in np.arange(a + 10.0, b, 30.0):
+            i = int(round(sl / STEP_M))
+            q = centre[i] + (half + 1.5) * left[i]
+            mb.add_object(*g.place(props.street_light(8.0, 2.0), heading[i] - np.pi / 2, q), "pole")

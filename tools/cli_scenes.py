@@ -1,0 +1,342 @@
+"""The scene commands of ``salo``: ``scenes`` (list), ``scene`` (export a mesh), ``view`` (picture).
+
+Registered on the main parser by ``add_commands(subparsers)``. Also the
+library entry ``build_world_and_trajectory`` that ``salo simulate --scene``
+uses. Heavy imports (trimesh, Embree, pyvista) happen inside the commands.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+def _out(text: str) -> None:
+    """The commands' report on stdout (library code logs; commands talk to the user)."""
+    sys.stdout.write(text + "\n")
+
+
+def _command_error(message: str) -> Exception:
+    from tools.cli import CommandError  # late: tools.cli imports this module
+
+    return CommandError(message)
+
+
+# ---------------------------------------------------------------- overrides
+def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> dict[str, Any]:
+    """Scene parameter overrides from a YAML file, then ``key=value`` pairs (which win).
+
+    The YAML file holds a flat mapping ``parameter: value``. Values from pairs stay
+    strings (the scene's parameter types convert them). Errors name the file or pair.
+    """
+    out: dict[str, Any] = {}
+    if yaml_file is not None:
+        import yaml
+
+        path = Path(yaml_file)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read parameter file ({exc.strerror or exc})") from None
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not valid YAML ({exc})") from None
+        if data is None:
+            data = {}
+        if not isinstance(data, dict) or not all(isinstance(k, str) for k in data):
+            raise ValueError(f"{path}: expected a mapping of parameter names to values")
+        for key, value in data.items():
+            if isinstance(value, (dict, list)):
+                raise ValueError(f"{path}: parameter {key}: expected a single value")
+            out[key] = value
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError(f"override {pair!r}: expected KEY=VALUE (e.g. length_m=800)")
+        out[key] = value.strip()
+    return out
+
+
+def _split_seed(overrides: dict[str, Any], seed: int | None) -> tuple[int, dict[str, Any]]:
+    """The seed (command line first, then the overrides, else 0) and the other overrides."""
+    rest = dict(overrides)
+    from_file = rest.pop("seed", None)
+    if seed is not None:
+        return int(seed), rest
+    if from_file is None:
+        return 0, rest
+    try:
+        return int(from_file), rest
+    except (TypeError, ValueError):
+        raise ValueError(f"parameter seed: {from_file!r} is not a valid int") from None
+
+
+def _jsonable(value: Any) -> Any:
+    """Numpy scalars and arrays to plain Python, recursively (for manifests)."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+# ---------------------------------------------------------------- library entry
+def build_scene_checked(name: str, seed: int, overrides: dict[str, Any]):
+    """``scenes.build_scene`` with its ValueError (unknown scene, bad parameter) as is."""
+    import scenes
+
+    return scenes.build_scene(name, seed=seed, **overrides)
+
+
+def build_world_and_trajectory(name: str, seed: int, overrides: dict[str, Any]):
+    """Build scene ``name`` and wrap it for the simulator.
+
+    Returns (``simlidar.world.World``, the scene's trajectory, info) where info is a
+    JSON-able dict for the sequence manifest: ``scene``, ``seed``, ``scene_params``
+    (resolved, seed included), ``scene_metadata``, ``trajectory_duration_s``,
+    ``mesh_sha256``. Raises ValueError naming an unknown scene or a bad parameter.
+    """
+    from simlidar.world import World
+
+    scene = build_scene_checked(name, seed, overrides)
+    world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, f"scene:{name}")
+    info = {
+        "scene": name,
+        "seed": int(seed),
+        "scene_params": _jsonable(scene.params),
+        "scene_metadata": _jsonable(scene.metadata),
+        "trajectory_duration_s": float(scene.trajectory.duration_s),
+        "mesh_sha256": scene.mesh_hash(),
+    }
+    return world, scene.trajectory, info
+
+
+# ---------------------------------------------------------------- parsers
+def _add_param_args(p) -> None:
+    p.add_argument("--seed", type=int, help="scene seed (default 0, or the parameter file's)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene parameter (repeatable); see `salo scenes NAME`")
+    p.add_argument("--params", type=Path, help="YAML file of scene parameters (KEY: VALUE)")
+
+
+def add_commands(subparsers) -> None:
+    """Register ``scenes``, ``scene`` and ``view`` on the main parser's sub-parsers."""
+    p = subparsers.add_parser("scenes", help="list the procedural scenes and their parameters",
+                              description="List the scenes with their parameters, defaults and help.")
+    p.add_argument("name", nargs="?", help="only this scene")
+    p.add_argument("--yaml", action="store_true",
+                   help="print the scene's defaults as a YAML parameter file (needs NAME)")
+    p.set_defaults(func=cmd_scenes)
+
+    p = subparsers.add_parser("scene", help="build a scene and export its mesh (PLY or GLB)",
+                              description="Build a procedural scene and write its mesh with an object "
+                              "id per triangle and a label per object: PLY (face property object_id, "
+                              "labels in a header comment) or GLB (one node per object, named label_id).")
+    p.add_argument("name", help="scene name (see `salo scenes`)")
+    _add_param_args(p)
+    p.add_argument("--out", type=Path, required=True, help="output mesh file, .ply or .glb")
+    p.add_argument("--path-out", type=Path, help="also write the drivable path as x y z lines")
+    p.set_defaults(func=cmd_scene)
+
+    p = subparsers.add_parser("view", help="picture of a scene or a simulated sequence (PNG)",
+                              description="Render off-screen: a 3D view with the path and one scan "
+                              "coloured by ring, beside a top-down overview. SOURCE is a scene name "
+                              "(one scan is simulated along the path) or a simulated sequence folder "
+                              "(its frame 0 is shown in the world it was simulated in).")
+    p.add_argument("source", help="scene name or sequence folder")
+    _add_param_args(p)
+    p.add_argument("--at", type=float, default=0.5,
+                   help="scene: where along the trajectory to scan, fraction of its duration (default 0.5)")
+    p.add_argument("--sensor", default="salo32", help="scene: sensor preset or YAML (default salo32)")
+    p.add_argument("--out", type=Path, required=True, help="output PNG")
+    p.set_defaults(func=cmd_view)
+
+
+# ---------------------------------------------------------------- commands
+def cmd_scenes(args) -> int:
+    import scenes
+
+    names = [args.name] if args.name else list(scenes.SCENES)
+    if args.name and args.name not in scenes.SCENES:
+        raise _command_error(f"unknown scene {args.name!r} (known: {', '.join(scenes.SCENES)})")
+    if args.yaml:
+        if not args.name:
+            raise _command_error("--yaml needs a scene NAME")
+        import yaml
+
+        defaults = {p.name: p.default for p in scenes.scene_parameters(args.name)}
+        _out(f"# salo scene parameters for {args.name!r}: edit and pass with --params FILE")
+        _out(yaml.safe_dump(defaults, sort_keys=False).rstrip())
+        return 0
+    for name in names:
+        _out(f"{name}: {scenes.SCENES[name].DESCRIPTION}")
+        if args.name is None:
+            continue
+        for p in scenes.scene_parameters(name):
+            bounds = ""
+            if p.choices:
+                bounds = f" [{'|'.join(p.choices)}]"
+            elif p.min is not None or p.max is not None:
+                lo = "" if p.min is None else f"{p.min:g}"
+                hi = "" if p.max is None else f"{p.max:g}"
+                bounds = f" [{lo}..{hi}]"
+            _out(f"  {p.name:24s} {p.type:5s} = {p.default!s:10s} {p.help}{bounds}")
+    if args.name is None:
+        _out("\n`salo scenes NAME` lists a scene's parameters; override them with --set KEY=VALUE "
+             "or --params FILE.yaml")
+    return 0
+
+
+def _scene_from_args(name: str, args):
+    try:
+        overrides = parse_overrides(args.overrides, args.params)
+        seed, rest = _split_seed(overrides, args.seed)
+        return build_scene_checked(name, seed, rest)
+    except ValueError as exc:
+        raise _command_error(str(exc)) from None
+
+
+def export_scene(scene, out: Path) -> Path:
+    """Write a scene's mesh: .ply (object_id per face, labels in the header) or .glb (a node per object)."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".ply":
+        from simlidar.world import World, save_world_ply
+
+        save_world_ply(World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels,
+                             scene.name), out)
+    elif suffix == ".glb":
+        import trimesh
+
+        order = np.argsort(scene.face_object_id, kind="stable")
+        ids = scene.face_object_id[order]
+        bounds = np.flatnonzero(np.diff(ids)) + 1
+        tscene = trimesh.Scene()
+        for chunk in np.split(order, bounds):
+            obj = int(scene.face_object_id[chunk[0]])
+            faces = scene.faces[chunk]
+            used, inverse = np.unique(faces, return_inverse=True)
+            mesh = trimesh.Trimesh(scene.vertices[used], inverse.reshape(faces.shape), process=False)
+            name = f"{scene.object_labels[obj]}_{obj:06d}"
+            tscene.add_geometry(mesh, node_name=name, geom_name=name)
+        tmp = out.with_name(out.name + ".tmp")
+        tmp.write_bytes(tscene.export(file_type="glb"))
+        tmp.replace(out)
+    else:
+        raise ValueError(f"{out}: unsupported mesh format {out.suffix!r} (use .ply or .glb)")
+    return out
+
+
+def cmd_scene(args) -> int:
+    scene = _scene_from_args(args.name, args)
+    try:
+        export_scene(scene, args.out)
+    except ValueError as exc:
+        raise _command_error(str(exc)) from None
+    if args.path_out is not None:
+        np.savetxt(args.path_out, scene.path, fmt="%.4f")
+    _out(f"{scene.name} seed {scene.params['seed']}: {scene.n_triangles} triangles, "
+         f"{len(scene.object_labels)} objects, path {_path_length(scene.path):.0f} m, "
+         f"trajectory {scene.trajectory.duration_s:.1f} s -> {args.out}")
+    return 0
+
+
+def _path_length(path: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+
+
+def cmd_view(args) -> int:
+    from simlidar.sensor import load_sensor
+    from simlidar.sweep import SweepSimulator
+    from tools.view import render_scene
+
+    source = Path(args.source)
+    if source.is_dir():
+        view = _sequence_view(source)
+    else:
+        import scenes
+
+        if args.source not in scenes.SCENES:
+            raise _command_error(
+                f"{args.source}: neither a sequence folder nor a scene (known: {', '.join(scenes.SCENES)})"
+            )
+        if not 0.0 <= args.at <= 1.0:
+            raise _command_error(f"--at {args.at}: expected a fraction of the trajectory in [0, 1]")
+        scene = _scene_from_args(args.source, args)
+        world, traj, _ = _wrap(scene)
+        sensor = load_sensor(args.sensor)
+        t0 = float(args.at * max(traj.duration_s - sensor.sweep_period_s, 0.0))
+        scan = SweepSimulator(world, sensor, seed=scene.params["seed"]).sweep(traj, t0)
+        T = traj.pose_at(np.array([t0]))[0]
+        view = {
+            "vertices": scene.vertices, "faces": scene.faces, "labels": scene.label_of_face(),
+            "path": scene.path, "T": T, "xyz": scan.xyz @ T[:3, :3].T + T[:3, 3], "ring": scan.ring,
+            "title": f"{scene.name} seed {scene.params['seed']}: {sensor.name} scan at t = {t0:.1f} s "
+                     f"({len(scan)} points)",
+        }
+    render_scene(view["vertices"], view["faces"], view["labels"], view["path"], args.out,
+                 view["T"], view["xyz"], view["ring"], title=view["title"])
+    _out(f"wrote {args.out}")
+    return 0
+
+
+def _wrap(scene):
+    from simlidar.world import World
+
+    world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, scene.name)
+    return world, scene.trajectory, {}
+
+
+def _sequence_view(folder: Path) -> dict:
+    """World, path, world pose and points of frame 0 of a simulated sequence folder."""
+    from simlidar.dataset import open_sequence, read_kitti_poses
+    from simlidar.world import load_world
+
+    seq = open_sequence(folder)
+    frame = seq[0]
+    manifest = seq.manifest
+    ring = frame.ring if frame.ring is not None else np.zeros(len(frame.points), dtype=int)
+    if manifest.get("scene"):
+        params = dict(manifest.get("scene_params") or {})
+        seed = int(manifest.get("seed", params.get("seed", 0)))
+        params.pop("seed", None)
+        try:
+            scene = build_scene_checked(manifest["scene"], seed, params)
+        except ValueError as exc:
+            raise _command_error(f"{folder / 'manifest.json'}: {exc}") from None
+        t0 = float(seq.times[0]) if seq.times is not None else 0.0
+        T = scene.trajectory.pose_at(np.array([t0]))[0]
+        vertices, faces, labels, path = scene.vertices, scene.faces, scene.label_of_face(), scene.path
+        title = f"{folder.name}: scene {scene.name} seed {seed}, frame 0 ({len(frame.points)} points)"
+    elif manifest.get("mesh"):
+        world = load_world(manifest["mesh"])
+        vertices, faces = world.vertices, world.faces
+        labels = np.asarray(world.object_labels, dtype=object)[world.face_object_id]
+        T = np.eye(4)
+        poses_file = manifest.get("poses_file")
+        if poses_file and Path(poses_file).is_file():
+            world_poses = read_kitti_poses(poses_file)
+            T = world_poses[0]
+            path = world_poses[:, :3, 3]
+        else:
+            log.warning("%s: the manifest names no world pose file; drawing frame 0 at the origin", folder)
+            path = seq.poses[:, :3, 3] if seq.poses is not None else np.zeros((2, 3))
+        title = f"{folder.name}: mesh {Path(manifest['mesh']).name}, frame 0 ({len(frame.points)} points)"
+    else:
+        raise _command_error(f"{folder / 'manifest.json'}: names neither a scene nor a mesh to draw")
+    return {"vertices": vertices, "faces": faces, "labels": labels, "path": path, "T": T,
+            "xyz": frame.points @ T[:3, :3].T + T[:3, 3], "ring": ring, "title": title}
+
+
+__all__ = ["add_commands", "build_world_and_trajectory", "export_scene", "parse_overrides"]
