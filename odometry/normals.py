@@ -1,0 +1,269 @@
+"""k-nearest-neighbour surface normals by principal component analysis (PCA / SVD).
+
+For a query point q with neighbours p_0 .. p_{k-1} (its k nearest points in the
+raw scan), the centred data matrix is ``D = P - 1 m^T`` (k x 3, m the mean of
+the neighbours). With the SVD ``D = U S V^T`` (numpy's convention: the columns
+of V are the right singular vectors, singular values s_0 >= s_1 >= s_2), the
+normal is the last right singular vector v_2. The same V and ``s_l^2`` are the
+eigenvectors and eigenvalues of the 3 x 3 scatter matrix ``D^T D``; this module
+computes them that way: a 3 x 3 symmetric eigenproblem per point, solved in
+closed form for all points at once (``symmetric_eigh_descending``), is an order
+of magnitude cheaper than a batched k x 3 SVD, and in float64 the squared
+condition number is harmless at lidar scales.
+
+Conventions used here and by ``odometry.ncf``:
+
+- ``axes[m]`` is V (3 x 3, columns v_0, v_1, v_2, a right-handed rotation) and
+  ``axes[m][:, 2]`` is the normal, oriented towards the viewpoint (the sensor
+  origin by default): ``n . (q - viewpoint) <= 0``.
+- ``scatter_eigenvalues`` are ``s_l^2`` (m^2), descending; ``eigenvalues`` are
+  those of the neighbourhood covariance ``D^T D / k`` (PCL's
+  ``computeMeanAndCovarianceMatrix``), also descending, so index 2 is the
+  smallest in both, as the paper's ``V_2``.
+- ``curvature = lambda_min / (lambda_0 + lambda_1 + lambda_2)`` as PCL's
+  ``solvePlaneParameters`` returns it: 0 on a plane, at most 1/3 (isotropic
+  scatter).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+@dataclass(frozen=True)
+class NormalEstimate:
+    """PCA of each query point's neighbourhood.
+
+    Attributes:
+        normals: (M, 3) unit normals, oriented towards the viewpoint.
+        axes: (M, 3, 3) right singular vectors as columns (v_0, v_1, v_2 = normal).
+        scatter_eigenvalues: (M, 3) ``s_l^2`` of the centred data matrix, descending, m^2.
+        mean: (M, 3) neighbourhood centroids, m.
+        k: neighbours per point.
+        neighbour_indices: (M, k) int rows of the searched cloud, nearest first
+            (None when the PCA was computed from given neighbourhoods).
+    """
+
+    normals: np.ndarray
+    axes: np.ndarray
+    scatter_eigenvalues: np.ndarray
+    mean: np.ndarray
+    k: int
+    neighbour_indices: np.ndarray | None = None
+
+    @property
+    def singular_values(self) -> np.ndarray:
+        """(M, 3) singular values s_0 >= s_1 >= s_2 of the centred data matrix, m."""
+        return np.sqrt(np.maximum(self.scatter_eigenvalues, 0.0))
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """(M, 3) eigenvalues of the neighbourhood covariance ``D^T D / k``, descending, m^2."""
+        return self.scatter_eigenvalues / self.k
+
+    @property
+    def curvature(self) -> np.ndarray:
+        """(M,) PCL surface curvature ``lambda_min / sum(lambda)`` in [0, 1/3] (nan if all zero)."""
+        lam = np.maximum(self.scatter_eigenvalues, 0.0)
+        total = lam.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(total > 0, lam[:, 2] / total, np.nan)
+
+    def __len__(self) -> int:
+        return len(self.normals)
+
+
+# Below this relative gap lambda_1 - lambda_2 the closed form loses digits (its
+# arccos is ill-conditioned where two eigenvalues meet: the normal's error grows
+# like eps (lambda_0 / gap)^2); those few matrices go to LAPACK instead.
+_CLOSED_FORM_MIN_REL_GAP = 1e-3
+
+
+def symmetric_eigh_descending(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigen-decomposition of (M, 3, 3) symmetric matrices, eigenvalues descending.
+
+    Returns (w (M, 3), V (M, 3, 3)) with ``A = V diag(w) V^T``, columns of V the
+    eigenvectors, ``det V = +1``; nan for matrices with non-finite entries.
+
+    Closed form, vectorised (several times faster than a LAPACK call per
+    matrix): the eigenvalues from the trigonometric solution of the
+    characteristic cubic; v_2 (smallest) as the longest cross product of two
+    rows of ``A - lambda_2 I``; v_0, v_1 from the 2 x 2 problem in the plane
+    orthogonal to v_2. Matrices whose two smallest eigenvalues are closer than
+    ``_CLOSED_FORM_MIN_REL_GAP * lambda_0`` are passed to ``numpy.linalg.eigh``.
+    """
+    A = np.asarray(A, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        w, V = _eigh3_closed_form(A)
+        redo = ~((w[:, 1] - w[:, 2]) > _CLOSED_FORM_MIN_REL_GAP * np.abs(w[:, 0]))
+        redo |= ~np.isfinite(w).all(axis=1) | ~np.isfinite(V).all(axis=(1, 2))
+    if np.any(redo):
+        finite = np.isfinite(A).all(axis=(1, 2))
+        lap = redo & finite
+        w[redo] = np.nan
+        V[redo] = np.nan
+        if np.any(lap):
+            w_l, V_l = np.linalg.eigh(A[lap])  # ascending
+            V_l = V_l[..., ::-1].copy()
+            V_l[..., :, 0] = np.cross(V_l[..., :, 1], V_l[..., :, 2])  # right-handed
+            w[lap] = w_l[..., ::-1]
+            V[lap] = V_l
+    return w, V
+
+
+def _eigh3_closed_form(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unguarded closed-form eigen-decomposition of (M, 3, 3) symmetric matrices (descending)."""
+    a00, a01, a02 = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    a11, a12, a22 = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
+    # Eigenvalues: A = q I + p B with tr B = 0, |B| normalised; det B / 2 = cos(3 phi).
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p = np.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
+    det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
+    r = np.where(p > 0, np.clip(det / (2.0 * p**3), -1.0, 1.0), 0.0)
+    phi = np.arccos(r) / 3.0
+    lam2 = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    # v_2 spans the null space of A - lambda_2 I: the longest cross product of two rows.
+    r0 = np.stack([a00 - lam2, a01, a02], axis=1)
+    r1 = np.stack([a01, a11 - lam2, a12], axis=1)
+    r2 = np.stack([a02, a12, a22 - lam2], axis=1)
+    c = np.stack([np.cross(r0, r1), np.cross(r0, r2), np.cross(r1, r2)], axis=1)
+    cn = np.einsum("mij,mij->mi", c, c)
+    best = np.argmax(cn, axis=1)
+    rows = np.arange(len(A))
+    v2 = c[rows, best] / np.sqrt(cn[rows, best])[:, None]
+    # An orthonormal basis (e1, e2) of the plane orthogonal to v_2, then the 2 x 2 problem there.
+    use_x = np.abs(v2[:, 0]) > np.abs(v2[:, 1])
+    zero = np.zeros_like(q)
+    e1 = np.where(
+        use_x[:, None],
+        np.stack([-v2[:, 2], zero, v2[:, 0]], axis=1),
+        np.stack([zero, v2[:, 2], -v2[:, 1]], axis=1),
+    )
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(v2, e1)
+    Ae1 = np.einsum("mij,mj->mi", A, e1)
+    Ae2 = np.einsum("mij,mj->mi", A, e2)
+    m00 = np.einsum("mi,mi->m", e1, Ae1)
+    m01 = np.einsum("mi,mi->m", e2, Ae1)
+    m11 = np.einsum("mi,mi->m", e2, Ae2)
+    theta = 0.5 * np.arctan2(2.0 * m01, m00 - m11)
+    v0 = np.cos(theta)[:, None] * e1 + np.sin(theta)[:, None] * e2
+    v1 = np.cross(v2, v0)  # so that v_0 = v_1 x v_2
+    half = 0.5 * (m00 + m11)
+    rad = np.hypot(0.5 * (m00 - m11), m01)
+    lam2_rq = np.einsum("mi,mij,mj->m", v2, A, v2)  # Rayleigh quotient: more accurate than the cubic
+    w = np.stack([half + rad, half - rad, lam2_rq], axis=1)
+    return w, np.stack([v0, v1, v2], axis=2)
+
+
+def local_pca(
+    neighbourhoods: np.ndarray,
+    query_points: np.ndarray | None = None,
+    viewpoint: np.ndarray | None = None,
+) -> NormalEstimate:
+    """PCA normals of given neighbourhoods.
+
+    Args:
+        neighbourhoods: (M, k, 3) neighbour coordinates, m (k >= 3).
+        query_points: (M, 3) the points the normals belong to, used only to orient
+            them (default: the neighbourhood means).
+        viewpoint: (3,) where the sensor is, m (default: the origin).
+
+    Returns:
+        ``NormalEstimate`` without ``neighbour_indices``.
+    """
+    P = np.asarray(neighbourhoods, dtype=np.float64)
+    if P.ndim != 3 or P.shape[2] != 3 or P.shape[1] < 3:
+        raise ValueError(f"neighbourhoods must be (M, k, 3) with k >= 3, got {P.shape}")
+    k = P.shape[1]
+    mean = np.einsum("mki->mi", P) / k  # (einsum: several times faster than mean over axis 1)
+    D = P - mean[:, None, :]
+    scatter = np.matmul(D.transpose(0, 2, 1), D)
+    lam, V = symmetric_eigh_descending(scatter)
+    q = mean if query_points is None else np.asarray(query_points, dtype=np.float64)
+    vp = np.zeros(3) if viewpoint is None else np.asarray(viewpoint, dtype=np.float64)
+    # Orient towards the viewpoint; flipping v_2 and v_1 together keeps det V = +1.
+    sign = np.where(np.einsum("mi,mi->m", V[:, :, 2], q - vp) > 0, -1.0, 1.0)
+    V[:, :, 1:] *= sign[:, None, None]
+    return NormalEstimate(
+        normals=V[:, :, 2].copy(),
+        axes=V,
+        scatter_eigenvalues=lam,
+        mean=mean,
+        k=k,
+    )
+
+
+def knn(
+    cloud: np.ndarray,
+    query_points: np.ndarray,
+    k: int,
+    tree: cKDTree | None = None,
+    workers: int = -1,
+) -> np.ndarray:
+    """(M, k) int indices of each query point's k nearest cloud points, nearest first.
+
+    Args:
+        cloud: (N, 3) searched points, m (N >= k).
+        query_points: (M, 3) m.
+        tree: a ``cKDTree`` already built on ``cloud`` (built here if None).
+        workers: threads for the query (-1: all cores).
+    """
+    if len(cloud) < k:
+        raise ValueError(f"the cloud has {len(cloud)} points, fewer than k = {k} neighbours")
+    if tree is None:
+        tree = cKDTree(cloud, balanced_tree=False, compact_nodes=False)
+    _, idx = tree.query(query_points, k=k, workers=workers)
+    return np.asarray(idx, dtype=np.intp).reshape(len(query_points), k)
+
+
+def estimate_normals(
+    cloud: np.ndarray,
+    k: int = 20,
+    query_points: np.ndarray | None = None,
+    viewpoint: np.ndarray | None = None,
+    tree: cKDTree | None = None,
+    workers: int = -1,
+) -> NormalEstimate:
+    """Normals of ``query_points`` from their k nearest neighbours in the raw ``cloud``.
+
+    Args:
+        cloud: (N, 3) the raw scan, sensor frame, m.
+        k: neighbours per point (>= 3). A query point that belongs to the cloud
+            counts as its own first neighbour, as in PCL.
+        query_points: (M, 3) points to estimate normals at, e.g. voxel centroids
+            (default: every cloud point).
+        viewpoint: (3,) sensor position for the orientation ``n . (q - viewpoint) <= 0``
+            (default: the origin of the scan's frame).
+        tree: optional ``cKDTree`` already built on ``cloud``.
+        workers: kd-tree query threads (-1: all cores).
+
+    Returns:
+        ``NormalEstimate`` with ``neighbour_indices`` (M, k) into ``cloud``;
+        ``cloud[result.neighbour_indices]`` are the (M, k, 3) neighbourhoods that
+        ``odometry.ncf.normal_covariance`` takes.
+    """
+    cloud = np.asarray(cloud, dtype=np.float64)
+    if k < 3:
+        raise ValueError(f"k must be >= 3 to define a plane, got {k}")
+    q = cloud if query_points is None else np.asarray(query_points, dtype=np.float64)
+    idx = knn(cloud, q, k, tree=tree, workers=workers)
+    est = local_pca(cloud[idx], query_points=q, viewpoint=viewpoint)
+    return NormalEstimate(
+        normals=est.normals,
+        axes=est.axes,
+        scatter_eigenvalues=est.scatter_eigenvalues,
+        mean=est.mean,
+        k=k,
+        neighbour_indices=idx,
+    )
+
+
+def angle_between_normals_rad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N,) unsigned angle between (N, 3) unit normals, ignoring orientation, rad in [0, pi/2]."""
+    # atan2 of |a x b| and |a . b|: accurate at small angles, where arccos loses half the digits.
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.abs(np.einsum("ij,ij->i", a, b)))
