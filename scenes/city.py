@@ -456,6 +456,7 @@ def _boundary_loop(cells: set[tuple[int, int]]) -> list[tuple[int, int]] | None:
     corners = []
     for k in range(n):
         a, b, c = np.array(loop[k - 1]), np.array(loop[k]), np.array(loop[(k + 1) % n])
-        if np.cross(b - a, c - b) != 0:
+        u, w = b - a, c - b
+        if u[0] * w[1] - u[1] * w[0] != 0:
             corners.append(loop[k])
     return corners

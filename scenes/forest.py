@@ -62,8 +62,9 @@ def build(p: Params) -> Scene:
     # as its own band following the road, 1 m along and across (both sample the same
     # surface, so where they overlap they agree to millimetres).
     half_w = p.road_width_m / 2 + 1.0
-    v_dist = tree.query(v[:, :2])[0]
-    band = v_dist[f].min(axis=1) <= margin
+    v_dist, v_near = tree.query(v[:, :2])
+    # (beyond the road's ends the band stops: keep the ground there)
+    v_dist = np.where((v_near > 0) & (v_near < len(centre) - 1), v_dist, np.inf)
     under_road = v_dist[f].max(axis=1) < half_w
     mb = MeshBuilder()
     mb.add(v, f[~under_road], mb.new_object("ground"))
@@ -77,6 +78,7 @@ def build(p: Params) -> Scene:
 
     # Trees: random positions at the density, a minimum spacing, clear of the road.
     clear = p.road_width_m / 2 + p.verge_m
+    band = tree.query(v[f].mean(axis=1)[:, :2])[0] <= margin
     area_ha = band.sum() / len(f) * (hi[0] - lo[0]) * (hi[1] - lo[1]) / 1e4
     n_try = int(p.tree_density_per_ha * area_ha * 1.6)
     cand = rng.uniform(lo, hi, size=(n_try, 2))
