@@ -111,7 +111,7 @@ import numpy as np
 from .normals import NormalEstimate, local_pca
 
 # Recommended c_tau (module notes, "Threshold"): a 3 deg 1-sigma tilt of the
-# normal about its least certain axis, c_tau = radians(3)^2 = 2.74e-3 rad^2.
+# normal in its least certain direction, c_tau = radians(3)^2 = 2.74e-3 rad^2.
 DEFAULT_MAX_NORMAL_STD_DEG = 3.0
 DEFAULT_C_TAU_RAD2 = math.radians(DEFAULT_MAX_NORMAL_STD_DEG) ** 2
 
@@ -425,7 +425,7 @@ def normal_covariance(
         by0 = beta_r2 * y0
         num = _sym2(_dot(by0, y0), _dot(by0, y1), _dot(beta_r2 * y1, y1))
         # v_l^T Sigma_j v_l = alpha_j + beta_j (PV_jl / r_j)^2, alpha_j = sa^2 r_j^2
-        n_diag = np.einsum("mk,mkl->ml", beta_r2, PV * PV)
+        n_diag = np.einsum("mk,mkl->ml", beta_r2, np.square(PV))
         if sa2 > 0:
             alpha = sa2 * r2
             aa0 = alpha * a0
