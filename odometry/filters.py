@@ -1,0 +1,146 @@
+"""Filtration of a raw scan into ICP points (Alg. 1, line 1): voxel grid, normals, NCF, curvature.
+
+The steps, in the paper's order:
+
+1. voxel grid: the centroid of the raw points in each occupied voxel;
+2. a normal per centroid by PCA of its k nearest neighbours in the RAW scan
+   (``odometry.normals``), and the normal covariance filter (``odometry.ncf``);
+3. the curvature filter: PCL's ``lambda_min / sum(lambda)`` above a threshold.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .config import OdometryConfig
+from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
+from .normals import estimate_normals
+
+
+def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray | None = None):
+    """(N, 3) points -> (M, 3) centroids of the points in each occupied cubic voxel.
+
+    Voxels are aligned to the frame's origin; the output is ordered by voxel key
+    (deterministic). With ``values`` (N,), also returns their (M,) mean per voxel
+    (e.g. the firing time of each centroid).
+    """
+    if len(points) == 0:
+        return np.zeros((0, 3)) if values is None else (np.zeros((0, 3)), np.zeros(0))
+    keys = np.floor(points / voxel_size_m).astype(np.int64)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    sums = np.stack([np.bincount(inverse, weights=points[:, c], minlength=len(counts)) for c in range(3)], axis=1)
+    if values is None:
+        return sums / counts[:, None]
+    return sums / counts[:, None], np.bincount(inverse, weights=values, minlength=len(counts)) / counts
+
+
+def curvature_keep(curvature: np.ndarray, max_curvature: float) -> np.ndarray:
+    """(M,) PCL curvatures -> (M,) bool, True where the surface is flat enough (nan: reject)."""
+    with np.errstate(invalid="ignore"):
+        return curvature <= max_curvature
+
+
+@dataclass
+class FilteredScan:
+    """The ICP points of one scan, in its (de-skewed) sensor frame.
+
+    points: (M, 3) voxel centroids that passed every filter, m.
+    normals: (M, 3) unit normals, facing the sensor.
+    rings: (M,) int ring of each point (that of its nearest raw point), or None.
+    times_s: (M,) mean firing time of each point's voxel, s, or None.
+    normal_std_rad: (M,) 1-sigma tilt of the normal about its least certain axis
+        (NCF's prediction; nan when the NCF did not run).
+    raw_points: (N, 3) the de-skewed raw points the normals were estimated from.
+    raw_tree: cKDTree over ``raw_points``.
+    counts: points after each stage: raw, voxels, ncf, curvature.
+    seconds: time spent per stage.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    rings: np.ndarray | None
+    times_s: np.ndarray | None
+    normal_std_rad: np.ndarray
+    raw_points: np.ndarray
+    raw_tree: cKDTree
+    counts: dict = field(default_factory=dict)
+    seconds: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def ncf_noise_model(config: OdometryConfig, sensor_range_noise_std_m: float | None):
+    """The NCF's noise model from the config (the sensor's range noise when not overridden)."""
+    if config.ncf_noise_model == "isotropic":
+        return IsotropicNoise(point_noise_std_m=config.ncf_point_noise_std_m)
+    sigma = config.ncf_range_noise_std_m or sensor_range_noise_std_m
+    if not sigma:
+        raise ValueError(
+            "the range-noise NCF needs a noise level: give a sensor (--sensor) or set ncf_range_noise_std_m"
+        )
+    return RangeNoise(range_noise_std_m=sigma)
+
+
+def filter_scan(
+    raw_points: np.ndarray,
+    config: OdometryConfig,
+    raw_rings: np.ndarray | None = None,
+    sensor_range_noise_std_m: float | None = None,
+    raw_times_s: np.ndarray | None = None,
+) -> FilteredScan:
+    """Filter a de-skewed raw scan (N, 3) into ICP points with normals (see module doc)."""
+    seconds: dict[str, float] = {}
+    t = time.perf_counter()
+    if raw_times_s is None:
+        centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m), None
+    else:
+        centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m, raw_times_s)
+    tree = cKDTree(raw_points, balanced_tree=False, compact_nodes=False)
+    seconds["voxel"] = time.perf_counter() - t
+    counts = {"raw": len(raw_points), "voxels": len(centroids)}
+
+    t = time.perf_counter()
+    k = min(config.normal_neighbours, len(raw_points))
+    if k < 3:
+        empty = np.zeros((0, 3))
+        return FilteredScan(empty, empty, None, None, np.zeros(0), raw_points, tree,
+                            {**counts, "ncf": 0, "curvature": 0}, seconds)
+    est = estimate_normals(raw_points, k=k, query_points=centroids, tree=tree)
+    seconds["normals"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    keep = np.ones(len(centroids), dtype=bool)
+    normal_std = np.full(len(centroids), np.nan)
+    if config.ncf:
+        noise = ncf_noise_model(config, sensor_range_noise_std_m)
+        keep, cov = normal_covariance_filter(
+            raw_points[est.neighbour_indices], noise,
+            c_tau_rad2=math.radians(config.ncf_max_normal_std_deg) ** 2, pca=est,
+        )
+        normal_std = cov.max_std_rad
+    counts["ncf"] = int(keep.sum())
+    keep &= curvature_keep(est.curvature, config.max_curvature)
+    counts["curvature"] = int(keep.sum())
+    seconds["ncf_curvature"] = time.perf_counter() - t
+
+    rings = None if raw_rings is None else np.asarray(raw_rings)[est.neighbour_indices[keep, 0]]
+    return FilteredScan(
+        points=centroids[keep],
+        normals=est.normals[keep],
+        rings=rings,
+        times_s=None if centroid_times is None else centroid_times[keep],
+        normal_std_rad=normal_std[keep],
+        raw_points=raw_points,
+        raw_tree=tree,
+        counts=counts,
+        seconds=seconds,
+    )

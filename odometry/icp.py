@@ -1,0 +1,169 @@
+"""The ICP of Alg. 1: match, reject, estimate, update, until the termination criteria hold.
+
+Initialisation (the constant-velocity guess) and filtration happen before, in
+``odometry.pipeline``; this module registers one prepared source against one
+prepared target.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from simlidar import se3
+
+from .config import OdometryConfig
+from .estimation import point_to_plane_step
+from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
+
+
+@dataclass
+class Source:
+    """The scan being registered, in its own (de-skewed) sensor frame.
+
+    points: (M, 3) m; normals: (M, 3) unit;
+    gcr_threshold_m: (M,) max neighbour beam distance per point (None: no GCR).
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    gcr_threshold_m: np.ndarray | None = None
+
+
+@dataclass
+class Target:
+    """The scan registered against: points, a k-d tree over them, and their normals.
+
+    points: (N, 3) m. normals: (N, 3) unit, or rows of nan filled on demand by
+    ``estimate_normals(indices) -> (len(indices), 3)`` (a raw target, where
+    computing every normal would be wasted work).
+    """
+
+    points: np.ndarray
+    tree: cKDTree
+    normals: np.ndarray
+    estimate_normals: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def normals_at(self, index: np.ndarray) -> np.ndarray:
+        n = self.normals[index]
+        if self.estimate_normals is not None:
+            missing = np.isnan(n[:, 0])
+            if missing.any():
+                rows = np.unique(index[missing])
+                self.normals[rows] = self.estimate_normals(rows)
+                n = self.normals[index]
+        return n
+
+
+@dataclass
+class RegistrationResult:
+    """Outcome of one registration (frame-explicit: maps source points into the target frame).
+
+    T_target_source: (4, 4). converged: a termination threshold was met before the
+    iteration cap. iterations: steps taken. matches: number of correspondences
+    after each stage of the last iteration ("candidates", then each rejector by name);
+    n_matches: those used by the last step.
+    rms_m: point-to-plane RMS residual at the last step. H: (6, 6) information of
+    the last step's matches. info_eigenvalues: (6,) ascending eigenvalues of H / N;
+    translation_eigenvalues: (3,) of its translation block. degenerate: the
+    smallest translational eigenvalue is below the config's threshold. singular:
+    too few matches or a rank-deficient system; the result is then the initial guess.
+    """
+
+    T_target_source: np.ndarray
+    converged: bool = False
+    iterations: int = 0
+    matches: dict = field(default_factory=dict)
+    n_matches: int = 0
+    rms_m: float = float("nan")
+    H: np.ndarray = field(default_factory=lambda: np.zeros((6, 6)))
+    info_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
+    translation_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    degenerate: bool = False
+    singular: bool = False
+    seconds: dict = field(default_factory=dict)
+
+
+def rejectors_for(config: OdometryConfig) -> list[Rejector]:
+    """The rejection chain of a config: distance, GCR (when on), then trimming."""
+    chain = [distance_rejector(config.max_correspondence_distance_m)]
+    if config.gcr:
+        chain.append(geometric_rejector())
+    if config.trim_fraction > 0:
+        chain.append(trimmed_rejector(config.trim_fraction))
+    return chain
+
+
+def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
+    """Nearest target point of each (N, 3) point within ``max_distance_m`` (k-d tree, all cores)."""
+    dist, idx = target.tree.query(points, k=1, workers=-1, distance_upper_bound=max_distance_m)
+    found = np.isfinite(dist)
+    return Matches(np.flatnonzero(found), idx[found], dist[found])
+
+
+def converged(xi: np.ndarray, T: np.ndarray, config: OdometryConfig) -> bool:
+    """Absolute and relative thresholds on the increment ``xi`` (rho m, omega rad)."""
+    dt, dr = np.linalg.norm(xi[:3]), np.linalg.norm(xi[3:])
+    abs_t, abs_r = config.abs_translation_tol_m, math.radians(config.abs_rotation_tol_deg)
+    rel_t = config.rel_tolerance * np.linalg.norm(T[:3, 3])
+    rel_r = config.rel_tolerance * float(se3.rotation_angle(T))
+    return bool(dt < max(abs_t, rel_t) and dr < max(abs_r, rel_r))
+
+
+def register(
+    source: Source,
+    target: Target,
+    T_init: np.ndarray,
+    config: OdometryConfig,
+    rejectors: Sequence[Rejector] | None = None,
+) -> RegistrationResult:
+    """Alg. 1's loop: estimate ``T_target_source`` starting from ``T_init`` (4, 4)."""
+    rejectors = rejectors_for(config) if rejectors is None else rejectors
+    T = np.array(T_init, dtype=float)
+    res = RegistrationResult(T_target_source=T.copy())
+    seconds = {"match": 0.0, "reject": 0.0, "estimate": 0.0}
+    # The distance rejector's bound also limits the k-d tree search.
+    bound = config.max_correspondence_distance_m
+    for it in range(1, config.max_iterations + 1):
+        t0 = time.perf_counter()
+        moved = source.points @ T[:3, :3].T + T[:3, 3]
+        m = match(moved, target, bound)
+        t1 = time.perf_counter()
+        counts = {"candidates": len(source.points)}
+        for reject in rejectors:
+            m = m.select(reject(m, source))
+            counts[reject.__name__] = len(m)
+        t2 = time.perf_counter()
+        seconds["match"] += t1 - t0
+        seconds["reject"] += t2 - t1
+        res.matches = counts
+        res.n_matches = len(m)
+        if len(m) < config.min_points:
+            res.singular = True
+            break
+        step = point_to_plane_step(moved[m.source_index], target.points[m.target_index],
+                                   target.normals_at(m.target_index))
+        seconds["estimate"] += time.perf_counter() - t2
+        res.iterations, res.rms_m, res.H = it, step.rms_m, step.H
+        if step.rank < 6:
+            res.singular = True
+            break
+        T = step.increment @ T
+        if converged(step.xi, T, config):
+            res.converged = True
+            break
+    res.seconds = seconds
+    if res.singular:
+        res.T_target_source = np.array(T_init, dtype=float)
+    else:
+        res.T_target_source = T
+        n = max(res.n_matches, 1)
+        res.info_eigenvalues = np.linalg.eigvalsh(res.H / n)
+        res.translation_eigenvalues = np.linalg.eigvalsh(res.H[:3, :3] / n)
+        res.degenerate = bool(res.translation_eigenvalues[0] < config.degenerate_eigenvalue)
+    return res

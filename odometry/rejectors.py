@@ -1,0 +1,75 @@
+"""Correspondence rejectors. All share one signature: ``(matches, source) -> keep mask``.
+
+``matches`` are the current nearest-neighbour pairs; ``source`` is the
+registration's source (``odometry.icp.Source``), which carries what a rejector
+may need beyond the distances (the GCR's per-point thresholds). The ICP applies
+them in order, each to the matches the previous ones kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Matches:
+    """Nearest-neighbour correspondences.
+
+    source_index: (m,) rows of the source points; target_index: (m,) rows of the target.
+    distance_m: (m,) Euclidean distance between the moved source point and its target point.
+    """
+
+    source_index: np.ndarray
+    target_index: np.ndarray
+    distance_m: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.source_index)
+
+    def select(self, keep: np.ndarray) -> Matches:
+        return Matches(self.source_index[keep], self.target_index[keep], self.distance_m[keep])
+
+
+Rejector = Callable[[Matches, object], np.ndarray]
+
+
+def distance_rejector(max_distance_m: float) -> Rejector:
+    """The baseline's Euclidean distance rejector: keep matches closer than ``max_distance_m``."""
+
+    def reject(matches: Matches, source) -> np.ndarray:
+        return matches.distance_m < max_distance_m
+
+    reject.__name__ = "distance"
+    return reject
+
+
+def trimmed_rejector(fraction: float) -> Rejector:
+    """Trimmed ICP (Chetverikov et al. 2002): drop the ``fraction`` of matches with the largest distances."""
+
+    def reject(matches: Matches, source) -> np.ndarray:
+        n = len(matches)
+        n_keep = n - int(np.floor(fraction * n))
+        keep = np.zeros(n, dtype=bool)
+        if n_keep > 0:
+            keep[np.argpartition(matches.distance_m, n_keep - 1)[:n_keep]] = True
+        return keep
+
+    reject.__name__ = "trimmed"
+    return reject
+
+
+def geometric_rejector() -> Rejector:
+    """The geometric correspondence rejector (Sec. III-B): ``||p_k - p'_k|| < max_l d_{k,l}``.
+
+    The neighbour beam distances depend only on the source point, its normal and
+    ring, so ``source.gcr_threshold_m`` (``odometry.gcr``) is computed once per scan.
+    """
+
+    def reject(matches: Matches, source) -> np.ndarray:
+        return matches.distance_m < source.gcr_threshold_m[matches.source_index]
+
+    reject.__name__ = "gcr"
+    return reject

@@ -1,0 +1,147 @@
+"""ICP pieces against constructed truth: estimation, rejectors, termination, de-skew, init, config."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import box_room, constant_velocity
+
+from odometry.config import BL, NCF, SALO, ConfigError, config_from_dict, load_config, variant
+from odometry.deskew import deskew, redeskew
+from odometry.estimation import point_to_plane_step
+from odometry.filters import voxel_centroids
+from odometry.icp import Source, Target, converged, register
+from odometry.pipeline import Odometry, OdometryError
+from odometry.rejectors import Matches, distance_rejector, trimmed_rejector
+from simlidar import se3
+from simlidar.sensor import load_preset
+from simlidar.sweep import SweepSimulator
+
+
+def planes_cloud(rng, n=3000):
+    """Points on three orthogonal planes (a corner) with their normals: fully constrained."""
+    pts, nrm = [], []
+    for axis in range(3):
+        p = rng.uniform(-5, 5, (n, 3))
+        p[:, axis] = 3.0
+        normal = np.zeros(3)
+        normal[axis] = -1.0
+        pts.append(p)
+        nrm.append(np.tile(normal, (n, 1)))
+    return np.vstack(pts), np.vstack(nrm)
+
+
+def test_point_to_plane_step_recovers_small_motion():
+    rng = np.random.default_rng(0)
+    q, n = planes_cloud(rng)
+    T_true = se3.exp(np.array([0.05, -0.03, 0.02, 0.01, -0.02, 0.015]))
+    src = se3.transform_points(se3.inverse(T_true), q)  # source = target moved by T^-1
+    T = np.eye(4)
+    for _ in range(5):  # matches by index: the exact correspondences
+        step = point_to_plane_step(se3.transform_points(T, src), q, n)
+        T = step.increment @ T
+    assert np.abs(T - T_true).max() < 1e-9
+    assert step.rank == 6
+
+
+def test_point_to_plane_step_leaves_unconstrained_direction_alone():
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-5, 5, (500, 3))
+    q[:, 2] = 0.0  # one plane: x, y and yaw are unobservable
+    n = np.tile([0.0, 0.0, 1.0], (500, 1))
+    step = point_to_plane_step(q + [0.3, 0.2, 0.1], q, n)
+    assert step.rank == 3
+    assert np.allclose(step.xi[:2], 0.0, atol=1e-12)  # no motion invented along the plane
+    assert step.xi[2] == pytest.approx(-0.1)
+
+
+def test_rejectors():
+    d = np.arange(100, dtype=float) / 10
+    m = Matches(np.arange(100), np.arange(100), d)
+    assert distance_rejector(5.0)(m, None).sum() == 50
+    keep = trimmed_rejector(0.2)(m, None)
+    assert keep.sum() == 80 and not keep[80:].any()
+
+
+def test_termination():
+    cfg = BL
+    assert converged(np.array([1e-5, 0, 0, 0, 0, 0]), np.eye(4), cfg)
+    assert not converged(np.array([1e-3, 0, 0, 0, 0, 0]), np.eye(4), cfg)
+    T = np.eye(4)
+    T[0, 3] = 20.0  # relative threshold: 1e-4 of a 20 m motion is 2 mm
+    assert converged(np.array([1e-3, 0, 0, 0, 0, 0]), T, cfg)
+    rng = np.random.default_rng(2)
+    q, n = planes_cloud(rng)
+    tgt = Target(q, __import__("scipy").spatial.cKDTree(q), n)
+    src = Source(se3.transform_points(se3.exp(np.array([0.2, 0, 0, 0, 0, 0.02])), q), -n)
+    capped = register(src, tgt, np.eye(4), cfg.replace(max_iterations=1))
+    assert capped.iterations == 1 and not capped.converged
+    full = register(src, tgt, np.eye(4), cfg)
+    assert full.converged and full.iterations < cfg.max_iterations
+
+
+def test_voxel_centroids():
+    pts = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.2, 0.1, 0.1], [-0.1, 0.0, 0.0]])
+    c, t = voxel_centroids(pts, 1.0, values=np.array([1.0, 3.0, 5.0, 7.0]))
+    order = np.argsort(c[:, 0])
+    assert np.allclose(c[order], [[-0.1, 0, 0], [0.2, 0.2, 0.2], [1.2, 0.1, 0.1]])
+    assert np.allclose(t[order], [7.0, 2.0, 5.0])
+
+
+def test_deskew_matches_simulator_truth():
+    traj = constant_velocity(v=(12.0, 1.0, 0.0), yaw_rate=0.0)
+    sensor = load_preset("vlp16").with_overrides(range_noise_std_m=0.0)
+    scan = SweepSimulator(box_room(size=(80, 60, 10)), sensor).sweep(traj, 0.0)
+    motion = se3.inverse(traj.pose_at(np.array([0.0]))[0]) @ traj.pose_at(np.array([0.1]))[0]
+    fixed = deskew(scan.xyz, scan.time_s, motion, 0.1)
+    assert np.abs(fixed - scan.true_xyz).max() < 1e-9
+    assert np.abs(scan.xyz - scan.true_xyz).max() > 0.5
+    # redeskew turns a de-skew with a wrong motion into the right one
+    wrong = deskew(scan.xyz, scan.time_s, np.eye(4), 0.1)
+    n = np.tile([1.0, 0, 0], (len(wrong), 1))
+    p, n2 = redeskew(wrong, n, scan.time_s, np.eye(4), motion, 0.1)
+    assert np.abs(p - scan.true_xyz).max() < 1e-9 and np.allclose(n2, n)
+
+
+def test_constant_velocity_extrapolation_when_a_frame_is_empty():
+    rng = np.random.default_rng(3)
+    q, _ = planes_cloud(rng, 4000)
+    odo = Odometry(BL.replace(normal_neighbours=10, min_range_m=0.1, deskew=False))
+    step = se3.exp(np.array([0.3, 0.05, 0.0, 0.0, 0.0, 0.01]))
+    poses = [np.eye(4), step, step @ step]
+    for T in poses[:2]:
+        odo.register(se3.transform_points(se3.inverse(T), q))
+    assert np.abs(odo.poses[1] - step).max() < 2e-3
+    pose = odo.register(q[:5])  # nothing to register: the pose is extrapolated
+    assert odo.last.too_few_points and odo.last.extrapolated
+    assert np.allclose(pose, odo.poses[1] @ (se3.inverse(odo.poses[0]) @ odo.poses[1]))
+    nan_scan = se3.transform_points(se3.inverse(step @ step @ step), q)
+    nan_scan[:100] = np.nan
+    odo.register(nan_scan)
+    assert odo.last.points_nonfinite == 100 and not odo.last.extrapolated
+
+
+def test_gcr_without_sensor_is_a_clear_error():
+    with pytest.raises(OdometryError, match="--sensor"):
+        Odometry(SALO)
+    Odometry(NCF.replace(ncf_range_noise_std_m=0.02))  # the NCF alone can run without a sensor table
+
+
+def test_config_validation_and_yaml(tmp_path):
+    assert variant("bl").gcr is False and variant("ncf").ncf and variant("salo").gcr
+    with pytest.raises(ConfigError, match="unknown odometry variant 'x'"):
+        variant("x")
+    with pytest.raises(ConfigError, match="'trim_fraction' must be in"):
+        SALO.replace(trim_fraction=1.5)
+    with pytest.raises(ConfigError, match="'voxel_size_m' must be a number > 0"):
+        SALO.replace(voxel_size_m=0)
+    with pytest.raises(ConfigError, match="'ncf_noise_model'"):
+        SALO.replace(ncf_noise_model="gaussian")
+    with pytest.raises(ConfigError, match="'bogus' is not a parameter"):
+        config_from_dict({"bogus": 1})
+    p = tmp_path / "c.yaml"
+    p.write_text(NCF.replace(voxel_size_m=0.7).to_yaml())
+    assert load_config(p) == NCF.replace(voxel_size_m=0.7)
+    p.write_text("voxel_size_m: -1\n")
+    with pytest.raises(ConfigError, match="c.yaml"):
+        load_config(p)
