@@ -4,12 +4,14 @@ The vehicle starts at rest, accelerates to cruise speed, slows where the path
 curves (lateral acceleration limit) and stops at the path's end. Poses are
 evaluated in closed form at any time (no pose table to interpolate):
 
-- position: the path's cubic spline at the distance travelled, ``s(t)`` (a
-  monotone C1 interpolant of the speed profile's time table);
+- position: the path's cubic spline at the distance travelled, ``s(t)``
+  (exact within each 0.25 m step of the profile, where the acceleration is
+  constant: C1 in time);
 - heading: the spline's tangent; pitch: the road grade; roll: the cross-slope
   of the road surface under the wheels (when the scene gives its height);
 - body motion: squat under acceleration, dive under braking, roll outward in
-  turns, and a small seeded oscillation of heave, pitch and roll (suspension
+  turns (through a critically damped 1 Hz body mode, so the attitude lags the
+  accelerations and settles after a stop), and a small seeded oscillation of heave, pitch and roll (suspension
   modes near 1.2-1.8 Hz) that scales with speed;
 - the lidar sits ``mount_height_m`` above the road along the body's z axis.
 
@@ -21,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.interpolate import CubicSpline, PchipInterpolator
+from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 # Body-motion gains of a passenger car (typical figures): pitch per unit
@@ -29,6 +31,9 @@ from scipy.spatial.transform import Rotation
 PITCH_PER_ACCEL_RAD = np.radians(0.35)  # rad per m/s^2
 ROLL_PER_LAT_ACCEL_RAD = np.radians(0.5)  # rad per m/s^2
 HALF_TRACK_M = 0.8  # wheels' lateral offset from the centre, for the road's cross-slope
+BODY_MODE_HZ = 1.0  # natural frequency of the body's pitch/roll response to accelerations
+BODY_SETTLE_S = 3.0  # the response's length (it has settled to 1e-8 by then)
+BODY_DT_S = 0.01  # time step of the precomputed body response
 
 
 class PathTrajectory:
@@ -88,13 +93,26 @@ class PathTrajectory:
             v[k] = min(v[k], np.sqrt(v[k - 1] ** 2 + 2 * accel_m_s2 * step))
         for k in range(n - 2, -1, -1):  # brake no harder than accel_m_s2
             v[k] = min(v[k], np.sqrt(v[k + 1] ** 2 + 2 * accel_m_s2 * step))
+        # Constant acceleration within each step of the profile: exact, C1 motion.
+        self._a_seg = (v[1:] ** 2 - v[:-1] ** 2) / (2 * step)
         dt = 2 * step / (v[:-1] + v[1:])
         t = np.concatenate([[0.0], np.cumsum(dt)])
         self._s_grid, self._t_grid, self._v_grid = s, t, v
         self._curv_grid = curvature
-        self._accel_grid = np.gradient(v**2, s) / 2  # dv/dt = v dv/ds
-        self._s_of_t = PchipInterpolator(t, s)
         self._duration = float(t[-1])
+
+        # Body attitude from the accelerations, through the body's pitch/roll mode (a
+        # critically damped second-order response, so the body settles after a stop).
+        self._tb = np.arange(-BODY_SETTLE_S, self._duration + BODY_SETTLE_S, BODY_DT_S)
+        a_long = self._accel_at(self._tb)
+        sb = self.distance_at(self._tb)
+        a_lat = self.speed_at(self._tb) ** 2 * np.interp(sb, s, curvature)
+        a_lat[(self._tb < 0) | (self._tb > self._duration)] = 0.0
+        tau = np.arange(0.0, BODY_SETTLE_S, BODY_DT_S)
+        w = 2 * np.pi * BODY_MODE_HZ
+        kernel = w**2 * tau * np.exp(-w * tau) * BODY_DT_S  # unit gain at steady state
+        self._pitch_dyn = -PITCH_PER_ACCEL_RAD * np.convolve(a_long, kernel)[: len(self._tb)]
+        self._roll_dyn = ROLL_PER_LAT_ACCEL_RAD * np.convolve(a_lat, kernel)[: len(self._tb)]
 
         # Suspension oscillation: two modes per axis with seeded frequency and phase.
         rng = np.random.default_rng([int(seed), 0x5A5])
@@ -108,18 +126,42 @@ class PathTrajectory:
         """Time from rest at the start to rest at the end, s."""
         return self._duration
 
+    def _segment(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Clamped times, their profile segment and time into it."""
+        t = np.clip(np.atleast_1d(np.asarray(times, dtype=float)), 0.0, self._duration)
+        k = np.clip(np.searchsorted(self._t_grid, t, side="right") - 1, 0, len(self._t_grid) - 2)
+        return t, k, t - self._t_grid[k]
+
     def distance_at(self, times: np.ndarray) -> np.ndarray:
         """(n,) times, s -> (n,) distance travelled along the path, m (clamped to the ends)."""
-        t = np.clip(np.atleast_1d(np.asarray(times, dtype=float)), 0.0, self._duration)
-        return np.clip(self._s_of_t(t), 0.0, self.length_m)
+        _, k, tau = self._segment(times)
+        s = self._s_grid[k] + self._v_grid[k] * tau + 0.5 * self._a_seg[k] * tau**2
+        return np.clip(s, self._s_grid[k], self._s_grid[k + 1])
+
+    def speed_at(self, times: np.ndarray) -> np.ndarray:
+        """(n,) times, s -> (n,) speed, m/s (zero before the start and after the end)."""
+        t, k, tau = self._segment(times)
+        v = np.maximum(self._v_grid[k] + self._a_seg[k] * tau, 0.0)
+        raw = np.atleast_1d(np.asarray(times, dtype=float))
+        return np.where((raw < 0) | (raw > self._duration), 0.0, v)
+
+    def _accel_at(self, times: np.ndarray) -> np.ndarray:
+        """(n,) longitudinal acceleration, m/s^2 (zero at rest before and after)."""
+        _, k, _ = self._segment(times)
+        raw = np.atleast_1d(np.asarray(times, dtype=float))
+        return np.where((raw < 0) | (raw > self._duration), 0.0, self._a_seg[k])
 
     def time_at_distance(self, distance_m: np.ndarray) -> np.ndarray:
         """(n,) distance along the path, m -> (n,) time the vehicle passes there, s."""
-        return np.interp(np.atleast_1d(distance_m), self._s_grid, self._t_grid)
-
-    def speed_at(self, times: np.ndarray) -> np.ndarray:
-        """(n,) times, s -> (n,) speed, m/s."""
-        return np.interp(self.distance_at(times), self._s_grid, self._v_grid)
+        d = np.clip(np.atleast_1d(np.asarray(distance_m, dtype=float)), 0.0, self.length_m)
+        k = np.clip(np.searchsorted(self._s_grid, d, side="right") - 1, 0, len(self._s_grid) - 2)
+        v0, a = self._v_grid[k], self._a_seg[k]
+        ds = d - self._s_grid[k]
+        # solve ds = v0 tau + a tau^2 / 2 for the root in the segment
+        disc = np.sqrt(np.maximum(v0**2 + 2 * a * ds, 0.0))
+        tau = np.where(np.abs(a) > 1e-12, (disc - v0) / np.where(np.abs(a) > 1e-12, a, 1.0),
+                       ds / np.maximum(v0, 1e-12))
+        return self._t_grid[k] + tau
 
     def road_point_at(self, distance_m: np.ndarray) -> np.ndarray:
         """(n,) distance -> (n, 3) road-level point of the path, m."""
@@ -142,11 +184,10 @@ class PathTrajectory:
             zl = self.surface_height(*(p[:, :2] + HALF_TRACK_M * left).T)
             zr = self.surface_height(*(p[:, :2] - HALF_TRACK_M * left).T)
             roll = np.arctan2(zl - zr, 2 * HALF_TRACK_M)  # left side higher: positive about x
-        v = np.interp(s, self._s_grid, self._v_grid)
-        accel = np.interp(s, self._s_grid, self._accel_grid)
-        curv = np.interp(s, self._s_grid, self._curv_grid)
-        pitch = pitch - PITCH_PER_ACCEL_RAD * accel  # squat when accelerating, dive when braking
-        roll = roll + ROLL_PER_LAT_ACCEL_RAD * v**2 * curv  # body leans out of the turn
+        v = self.speed_at(t)
+        # squat when accelerating, dive when braking; lean out of turns
+        pitch = pitch + np.interp(t, self._tb, self._pitch_dyn, left=0.0, right=0.0)
+        roll = roll + np.interp(t, self._tb, self._roll_dyn, left=0.0, right=0.0)
         scale = np.minimum(1.0, v / max(self.speed_m_s, 1e-6))
         osc = np.sin(2 * np.pi * self._osc_freq[None] * t[:, None, None] + self._osc_phase[None]).sum(-1)
         osc = osc * 0.5 * self._osc_amp[None] * scale[:, None]  # (n, 3): heave, pitch, roll
