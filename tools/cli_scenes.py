@@ -309,8 +309,8 @@ def _sequence_view(folder: Path) -> dict:
     ring = frame.ring if frame.ring is not None else np.zeros(len(frame.points), dtype=int)
     if manifest.get("scene"):
         params = dict(manifest.get("scene_params") or {})
-        seed = int(manifest.get("seed", params.get("seed", 0)))
-        params.pop("seed", None)
+        # the resolved parameters hold the scene's seed; a top-level "seed" may be the noise's
+        seed = int(params.pop("seed", manifest.get("seed", 0)))
         try:
             scene = build_scene_checked(manifest["scene"], seed, params)
         except ValueError as exc:
