@@ -10,8 +10,11 @@ its normal points along ``dP/di x dP/dj``.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import trimesh
+from scipy.spatial import ConvexHull
 
 Part = tuple[np.ndarray, np.ndarray]
 
@@ -36,15 +39,36 @@ def box(size, center=(0.0, 0.0, 0.0), yaw: float = 0.0) -> Part:
 
 def cylinder(radius: float, height: float, base=(0.0, 0.0, 0.0), sections: int = 8) -> Part:
     """Vertical cylinder standing on ``base`` (3,), m."""
-    m = trimesh.creation.cylinder(radius=radius, height=height, sections=sections)
-    v = np.asarray(m.vertices) + np.array([0.0, 0.0, height / 2])
-    return v + np.asarray(base, dtype=float), np.asarray(m.faces)
+    v, f = _unit_cylinder(sections)
+    return v * np.array([radius, radius, height]) + np.asarray(base, dtype=float), f.copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _unit_cylinder(sections: int) -> Part:
+    """Radius 1, from z = 0 to 1 (trimesh's, built once per section count: scenes place thousands)."""
+    m = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=sections)
+    v = np.asarray(m.vertices) + np.array([0.0, 0.0, 0.5])
+    v.setflags(write=False)
+    f = np.asarray(m.faces)
+    f.setflags(write=False)
+    return v, f
 
 
 def convex(points: np.ndarray) -> Part:
-    """Convex hull of (n, 3) points, outward-wound (rocks, crowns, roofs, car cabins)."""
-    m = trimesh.convex.convex_hull(np.asarray(points, dtype=float))
-    return np.asarray(m.vertices), np.asarray(m.faces)
+    """Convex hull of (n, 3) points, outward-wound (rocks, crowns, roofs, car cabins).
+
+    scipy's qhull directly, each facet turned to agree with qhull's outward facet
+    normal: the same result as ``trimesh.convex.convex_hull`` without building and
+    processing a Trimesh, which dominates when a forest places thousands of crowns.
+    """
+    hull = ConvexHull(np.asarray(points, dtype=float))
+    faces = hull.simplices.copy()
+    p = hull.points
+    cross = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    backwards = np.einsum("ij,ij->i", cross, hull.equations[:, :3]) < 0
+    faces[backwards] = faces[backwards][:, ::-1]
+    used, inverse = np.unique(faces, return_inverse=True)
+    return p[used], inverse.reshape(faces.shape).astype(np.int64)
 
 
 def blob(rng: np.random.Generator, radii, center, n_points: int = 24, jitter: float = 0.25) -> Part:
