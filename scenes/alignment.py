@@ -49,7 +49,7 @@ def integrate(s: np.ndarray, curvature: np.ndarray, z: np.ndarray, heading0: flo
 
 def random_curves(rng: np.random.Generator, s: np.ndarray, min_radius_m: float, mean_gap_m: float,
                   transition_m: float) -> np.ndarray:
-    """(n,) curvature: curves of random sign and radius >= ``min_radius_m`` separated by straights.
+    """(n,) curvature: alternating curves of radius >= ``min_radius_m`` separated by straights.
 
     Each curve is a plateau with cosine transitions of ``transition_m`` (so the
     curvature, and a driver's steering, change smoothly); curves and straights
@@ -57,9 +57,11 @@ def random_curves(rng: np.random.Generator, s: np.ndarray, min_radius_m: float, 
     """
     kappa = np.zeros_like(s)
     pos = s[0] + rng.uniform(0.3, 1.0) * mean_gap_m
+    sign = rng.choice([-1.0, 1.0])
     while pos < s[-1]:
         length = rng.uniform(0.5, 1.5) * mean_gap_m
-        k = rng.choice([-1.0, 1.0]) / rng.uniform(min_radius_m, 2.5 * min_radius_m)
+        sign = -sign  # curves alternate, so the road winds but never turns back on itself
+        k = sign / rng.uniform(min_radius_m, 2.5 * min_radius_m)
         a, b = pos, pos + length
         rise = np.clip((s - a) / transition_m, 0, 1)
         fall = np.clip((b - s) / transition_m, 0, 1)

@@ -67,8 +67,17 @@ class Params(CommonParams):
                 f"parameter route_blocks: {self.route_blocks} is more than the "
                 f"{(self.streets_x - 1) * (self.streets_y - 1)} blocks between the streets"
             )
-        if self.turn_radius_m > self.street_width_m / 2 + self.sidewalk_width_m + 6.0:
-            raise ValueError("parameter turn_radius_m: too large for the street width")
+        # On a right turn the lane's arc (radius turn - offset about a centre on the corner's
+        # diagonal) must pass the kerb corner by a car's half width and a margin (0.95 + 0.5 m),
+        # plus 0.3 m that the path's smoothing cuts from the arc.
+        r_path = self.turn_radius_m - self.lane_offset_m
+        corner = np.sqrt(2.0) * abs(self.turn_radius_m - self.street_width_m / 2)
+        if r_path < 4.0 or r_path - corner < 1.75:
+            raise ValueError(
+                f"parameter turn_radius_m: with {self.street_width_m:g} m streets and the lane "
+                f"{self.lane_offset_m:g} m right of the centre, a {self.turn_radius_m:g} m turn "
+                f"{'is too tight for a car' if r_path < 4.0 else 'cuts over the kerb corner'}"
+            )
 
 
 def build(p: Params) -> Scene:
@@ -366,6 +375,9 @@ def _sidewalk_furniture(mb, p, rng, terrain, bx, by) -> None:
 def _parked_cars(mb, p, rng, terrain, sx, sy) -> int:
     """Cars in the parking lanes along both kerbs of every street, clear of intersections."""
     lateral = p.street_width_m / 2 - 1.1  # car centre from the street centre-line
+    # Park only where a car (0.95 m half width, 0.5 m margin) passes in the driven lane.
+    if lateral - 0.95 - p.lane_offset_m < 0.95 + 0.5:
+        return 0
     slot = 6.0
     keep_clear = p.street_width_m / 2 + 8.0
     count = 0

@@ -29,6 +29,7 @@ DESCRIPTION = "long tunnel (box or arched, straight or curved) under a hill, por
 
 STEP_M = 0.5  # path sampling
 SLICE_M = 2.0  # length of one ring of the bore's mesh
+FAN_CLEARANCE_M = 4.5  # usual clear height of a road tunnel: nothing hangs lower
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,11 @@ class Params(CommonParams):
         super().__post_init__()
         if self.curve_radius_m and self.curve_radius_m < 100.0:
             raise ValueError("parameter curve_radius_m: a road tunnel curve needs a radius >= 100 m (or 0)")
+        if self.curve_radius_m and self.length_m / self.curve_radius_m > np.pi / 2:
+            raise ValueError(
+                f"parameter curve_radius_m: a {self.length_m:g} m tunnel on a {self.curve_radius_m:g} m "
+                f"radius turns more than 90 degrees (gently curved: radius >= length_m / (pi / 2))"
+            )
         if self.lane_offset_m > self.width_m / 2 - self.walkway_width_m - 1.2:
             raise ValueError(f"parameter lane_offset_m: {self.lane_offset_m} m puts the vehicle on the walkway")
         if self.overburden_m < self.height_m + 1.0:
@@ -247,11 +253,12 @@ def _fittings(mb, p, rng, s, centre, left, heading, s_in, s_out) -> int:
         q = c + side * (half - 0.06) * lv
         mb.add_object(*g.box((1.5, 0.12, 2.0), q + 1.25 * up, yaw), "object")
         mb.add_object(*g.box((0.8, 0.05, 0.5), q + 2.8 * up - side * 0.05 * lv, yaw), "sign")
-        if k % 4 == 1:  # a pair of jet fans hung 0.2 m under the roof
-            fan_lat, fan_r = 2.2, 0.6
-            edge = fan_lat + fan_r
-            roof = p.height_m if p.cross_section == "box" else wall_h + np.sqrt(half**2 - edge**2)
-            fan_h = roof - 0.2 - fan_r
+        fan_lat, fan_r = 2.2, 0.6
+        edge = fan_lat + fan_r
+        roof = p.height_m if p.cross_section == "box" else wall_h + np.sqrt(max(half**2 - edge**2, 0.0))
+        fan_h = roof - 0.2 - fan_r
+        # a pair of jet fans hung 0.2 m under the roof, where they clear a 4.5 m vehicle envelope
+        if k % 4 == 1 and fan_h - fan_r >= FAN_CLEARANCE_M and edge < half:
             for lat in (-fan_lat, fan_lat):
                 fan = g.cylinder(fan_r, 4.0, sections=12)
                 v = fan[0] - np.array([0.0, 0.0, 2.0])

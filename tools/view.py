@@ -96,7 +96,7 @@ def render_scene(
         fwd = T_world_lidar[:3, 0]
         fwd_h = fwd - np.array([0.0, 0.0, fwd[2]])
         fwd_h /= max(np.linalg.norm(fwd_h), 1e-9)
-        pl.add_mesh(pv.Sphere(radius=0.5, center=origin), color="magenta")
+        pl.add_mesh(pv.Sphere(radius=0.25, center=origin), color="magenta")
         camera = _unoccluded_camera(vertices, faces, origin, -45.0 * fwd_h + np.array([0.0, 0.0, 28.0]))
         pl.camera.position = tuple(camera)
         pl.camera.focal_point = tuple(origin + 25.0 * fwd_h)
