@@ -71,7 +71,10 @@ def render_scene(
     scan_xyz_world: (N, 3) scan points in the world frame, m; scan_ring: (N,) ring index.
     """
     import pyvista as pv
+    from vtkmodules.vtkCommonCore import vtkLogger
 
+    # Off-screen without an X display VTK logs a harmless "bad X server connection".
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     mesh = _polydata(vertices, faces)
