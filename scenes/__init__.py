@@ -10,12 +10,16 @@ package knows nothing of the simulator: it makes a mesh and poses.
 
 from __future__ import annotations
 
+import logging
+import time
 from types import ModuleType
 from typing import Any
 
 from . import city, forest, highway, open_field, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve
+
+log = logging.getLogger(__name__)
 
 SCENES: dict[str, ModuleType] = {
     "city": city,
@@ -46,7 +50,12 @@ def resolve_params(name: str, seed: int = 0, **overrides: Any):
 def build_scene(name: str, seed: int = 0, **overrides: Any) -> Scene:
     """Build scene ``name`` with ``seed`` and parameter overrides (strings are converted)."""
     params = resolve_params(name, seed, **overrides)
-    return _module(name).build(params)
+    start = time.perf_counter()
+    scene = _module(name).build(params)
+    log.info("built %s (seed %d): %d triangles, %d objects, %.1f s of trajectory in %.2f s",
+             name, params.seed, scene.n_triangles, len(scene.object_labels), scene.trajectory.duration_s,
+             time.perf_counter() - start)
+    return scene
 
 
 __all__ = ["LABELS", "SCENES", "MeshBuilder", "ParamInfo", "Scene", "build_scene", "resolve_params",
