@@ -53,6 +53,8 @@ class OdometryConfig:
         min_range_m, max_range_m: points outside are ignored (ego vehicle, far noise).
         deskew: correct motion distortion with the constant-velocity motion when
             per-point times are known.
+        deskew_refinements: after the ICP, redo the de-skew with this frame's own
+            estimated motion and refine, this many times (0 = the previous motion only).
         kitti_vertical_correction_deg: rotate KITTI HDL-64E points about the axis
             perpendicular to their beam by this much (0 = off; 0.205 for KITTI).
     Matching and rejection:
@@ -88,6 +90,7 @@ class OdometryConfig:
     min_range_m: float = 2.5
     max_range_m: float = 120.0
     deskew: bool = True
+    deskew_refinements: int = 2
     kitti_vertical_correction_deg: float = 0.0
     match_target: str = "filtered"
     max_correspondence_distance_m: float = 1.0
@@ -124,7 +127,7 @@ class OdometryConfig:
             fail("min_range_m", f"must be < max_range_m ({self.min_range_m} >= {self.max_range_m})")
         if not 0 <= self.trim_fraction < 1:
             fail("trim_fraction", f"must be in [0, 1), got {self.trim_fraction}")
-        for key, lo in (("normal_neighbours", 3), ("max_iterations", 1), ("min_points", 6)):
+        for key, lo in (("normal_neighbours", 3), ("max_iterations", 1), ("min_points", 6), ("deskew_refinements", 0)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 fail(key, f"must be an integer >= {lo}, got {v!r}")

@@ -175,12 +175,25 @@ class Odometry:
         diag.too_few_points = len(scan) < cfg.min_points
 
         # init + align
+        T_deskew = T_guess  # the motion the scan is currently de-skewed with
         if not self.poses:
             T = np.eye(4)
         elif diag.too_few_points or self._target is None:
             T = T_guess
         else:
             result = register(self._source(scan), self._target, T_guess, cfg)
+            # The de-skew used the previous frame's motion. The estimate responds to the
+            # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
+            # closer), so plain re-use of the estimate oscillates: move the de-skew motion
+            # halfway towards the estimate (a damped fixed-point iteration) and refine.
+            # Only the filtered points are moved, so this is cheap.
+            for _ in range(cfg.deskew_refinements if deskewing else 0):
+                if result.singular:
+                    break
+                M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(result.T_target_source)))
+                scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, M, period)
+                T_deskew = M
+                result = register(self._source(scan), self._target, result.T_target_source, cfg)
             self._record(diag, result)
             seconds.update(result.seconds)
             T = result.T_target_source
@@ -194,7 +207,7 @@ class Odometry:
         if not diag.too_few_points:
             if deskewing and len(self.poses) > 1:
                 t = time.perf_counter()
-                scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_guess, T, period)
+                scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, T, period)
                 if cfg.match_target == "raw":
                     scan.raw_points = deskew(deskew(points, times_s, se3.inverse(T_guess), period), times_s, T,
                                              period)

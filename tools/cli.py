@@ -37,7 +37,13 @@ def _add_simulate(sub) -> None:
         "world, and write them as a sequence folder (KITTI odometry layout, sensor.yaml, "
         "manifest and per-point ground truth).",
     )
-    world = p.add_argument_group("world and path (a mesh with a pose file)")
+    p.add_argument("--scene", help="procedural scene (see `salo scenes`); or give --mesh and --poses")
+    p.add_argument("--set", dest="scene_overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene parameter (repeatable)")
+    p.add_argument("--scene-params", type=Path, help="YAML file of scene parameters")
+    p.add_argument("--speed", type=float, help="cruise speed along the scene's path, m/s")
+    p.add_argument("--start", type=float, default=0.0, help="time along the path of the first sweep, s (default 0)")
+    world = p.add_argument_group("your own world and path (instead of --scene)")
     world.add_argument("--mesh", type=Path, help="world mesh: PLY, OBJ, GLB or STL")
     world.add_argument(
         "--poses",
@@ -47,7 +53,7 @@ def _add_simulate(sub) -> None:
     )
     world.add_argument("--times", type=Path, help="times of the --poses lines, s (default: 1/rate apart)")
     p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
-    p.add_argument("--frames", type=int, help="number of sweeps (default: one per pose)")
+    p.add_argument("--frames", type=int, help="number of sweeps (default: one per pose, or 100 along a scene)")
     p.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
     p.add_argument("--noise-std", type=float, help="range noise standard deviation, m (overrides the sensor)")
     p.add_argument(
@@ -74,8 +80,10 @@ def cmd_simulate(args) -> int:
     from simlidar.world import load_world
 
     sensor = _sensor_from_args(args)
+    if args.scene is not None:
+        return _simulate_scene(args, sensor)
     if args.mesh is None or args.poses is None:
-        raise CommandError("give --mesh FILE and --poses FILE")
+        raise CommandError("give --scene NAME, or --mesh FILE and --poses FILE")
     world = load_world(args.mesh)
     poses = read_kitti_poses(args.poses)
     if args.times is not None:
@@ -93,7 +101,31 @@ def cmd_simulate(args) -> int:
     return _run_simulation(world, trajectory, sensor, args, frames, info, where=str(args.poses))
 
 
-def _run_simulation(world, trajectory, sensor, args, frames, info, where) -> int:
+def _simulate_scene(args, sensor) -> int:
+    from tools.cli_scenes import build_world_and_trajectory, parse_overrides
+
+    if args.mesh is not None or args.poses is not None:
+        raise CommandError("give either --scene or --mesh/--poses, not both")
+    try:
+        overrides = parse_overrides(args.scene_overrides, args.scene_params)
+        if args.speed is not None:
+            overrides["speed_m_s"] = args.speed
+        world, trajectory, info = build_world_and_trajectory(args.scene, args.seed, overrides)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    info["scene_seed"] = info.pop("seed")
+    available = int((trajectory.duration_s - args.start) / sensor.sweep_period_s)
+    frames = args.frames if args.frames is not None else min(available, 100)
+    if frames > available:
+        raise CommandError(
+            f"scene {args.scene}: its path lasts {trajectory.duration_s:.1f} s, room for {available} sweeps "
+            f"after --start {args.start:g} s, not {frames} (lower --frames, or raise --speed or the path length)"
+        )
+    return _run_simulation(world, trajectory, sensor, args, frames, {**info, "command": "simulate"},
+                           where=f"scene {args.scene}", t_start=args.start)
+
+
+def _run_simulation(world, trajectory, sensor, args, frames, info, where, t_start: float = 0.0) -> int:
     from simlidar.simulate import simulate_sequence
     from simlidar.sweep import SensorInsideGeometry
 
@@ -106,6 +138,7 @@ def _run_simulation(world, trajectory, sensor, args, frames, info, where) -> int
             args.out,
             frames=frames,
             seed=args.seed,
+            t_start=t_start,
             motion_distortion=args.motion_distortion,
             info={**info, "noise_std_m": sensor.range_noise_std_m},
             force=args.force,
@@ -261,9 +294,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in (_add_simulate, _add_odometry, _add_sensors, _add_demo):
         add(sub)
-    from tools import cli_evaluate
+    from tools import cli_evaluate, cli_scenes
 
     cli_evaluate.add_commands(sub)
+    cli_scenes.add_commands(sub)
     return parser
 
 
