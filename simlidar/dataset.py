@@ -430,14 +430,22 @@ def open_sequence(
     path: str | Path,
     sensor: str | Path | LidarModel | None = None,
     poses: str | Path | None = None,
+    topic: str | None = None,
 ) -> Sequence:
     """Open a sequence folder of any supported kind (detected from its files).
 
     sensor: preset, file or model overriding the folder's own ``sensor.yaml``.
     poses: ground-truth pose file; for real KITTI, the camera-frame file
         (default ``<sequences>/../poses/NN.txt`` when present).
+    topic: for a ROS 2 bag (a rosbag2 folder with ``metadata.yaml``, or an
+        ``.mcap`` / ``.db3`` file), the PointCloud2 topic to read
+        (``simlidar.bag.RosbagSequence``, which behaves like a ``Sequence``).
     """
     path = Path(path)
+    if path.suffix in (".mcap", ".db3") or (path / "metadata.yaml").is_file():
+        from .bag import open_bag  # imported here so that rosbags stays an optional dependency
+
+        return open_bag(path, load_sensor(sensor) if sensor is not None else None, poses, topic=topic)
     if not path.is_dir():
         raise DatasetError(f"{path}: not a folder")
     if (path / INCOMPLETE_MARKER).exists():
