@@ -194,11 +194,36 @@ def test_salo_odometry_on_an_exported_bag(seq_dir, tmp_path):
 
 
 # ---------------------------------------------------------------- other drivers' layouts
+def odometry_msg(stamp_ns, P, frame_id="map", child="lidar"):
+    T = TS.types
+    sec, nsec = divmod(stamp_ns, 10**9)
+    q = Rotation.from_matrix(P[:3, :3]).as_quat()
+    zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    return T["nav_msgs/msg/Odometry"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                        frame_id=frame_id),
+        child_frame_id=child,
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](
+            pose=T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=P[0, 3], y=P[1, 3], z=P[2, 3]),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),
+            covariance=np.zeros(36)),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=np.zeros(36)))
+
+
 def write_cloud_bag(path, records, stamps_ns, topic="/points", frame_id="lidar", height=1,
-                    plugin=StoragePlugin.MCAP):
-    """A bag of one PointCloud2 topic holding the given (N,) structured records (their padding kept)."""
+                    plugin=StoragePlugin.MCAP, odometry=()):
+    """A bag of one PointCloud2 topic holding the given (N,) structured records (their padding kept).
+
+    odometry: (stamp_ns, (4, 4) pose) pairs written as nav_msgs/Odometry on /ground_truth/odometry.
+    """
     T = TS.types
     with Writer(path, version=8, storage_plugin=plugin) as w:
+        if odometry:
+            c_odom = w.add_connection("/ground_truth/odometry", "nav_msgs/msg/Odometry", typestore=TS)
+            for stamp, P in odometry:
+                w.write(c_odom, stamp, TS.serialize_cdr(odometry_msg(stamp, P), "nav_msgs/msg/Odometry"))
         conn = w.add_connection(topic, PC2, typestore=TS)
         for rec, stamp in zip(records, stamps_ns, strict=True):
             h = height if len(rec) % height == 0 else 1
@@ -351,19 +376,9 @@ def test_bag_errors(seq, bag, tmp_path, monkeypatch):
         open_sequence(bag, topic="/ground_truth/odometry")
 
     # no PointCloud2 at all
-    T = TS.types
     with Writer(tmp_path / "odom_only", version=8) as w:
         c = w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=TS)
-        w.write(c, 1, TS.serialize_cdr(T["nav_msgs/msg/Odometry"](
-            header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=1), frame_id="map"),
-            child_frame_id="base", pose=T["geometry_msgs/msg/PoseWithCovariance"](
-                pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0, y=0, z=0),
-                                                 orientation=T["geometry_msgs/msg/Quaternion"](x=0, y=0, z=0, w=1)),
-                covariance=np.zeros(36)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](
-                linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
-                angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0)), covariance=np.zeros(36))),
-            "nav_msgs/msg/Odometry"))
+        w.write(c, 1, TS.serialize_cdr(odometry_msg(1, np.eye(4)), "nav_msgs/msg/Odometry"))
     with pytest.raises(BagError, match=r"odom_only: no sensor_msgs/msg/PointCloud2 topic \(topics: /odom"):
         open_sequence(tmp_path / "odom_only")
 
@@ -469,3 +484,34 @@ def test_tum_needs_poses(seq, tmp_path):
     res = export_rosbag(open_sequence(tmp_path / "np"), tmp_path / "np_bag")
     assert res.messages == {"/points": 2}
     assert open_sequence(res.path).poses is None
+
+
+def test_laser_id_order_mapped_through_the_sensor(seq, tmp_path, caplog):
+    """A ring field in firing (laser id) order, as the raw VLP-16 interleaves it: mapped with the sensor table."""
+    sensor = seq.sensor
+    dtype = padded([("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("laser_id", 12, 4)], 14)
+    f = seq[0]
+    rec = np.zeros(len(f.points), dtype=dtype)
+    for i, axis in enumerate("xyz"):
+        rec[axis] = f.points[:, i]
+    rec["laser_id"] = sensor.laser_of_ring[f.ring]
+    path = write_cloud_bag(tmp_path / "laser.mcap", [rec], [stamp_ns(seq, 0)])
+    b = open_sequence(path, sensor=sensor)
+    assert b.layout.ring_order == "laser_id" and np.array_equal(b[0].ring, f.ring)
+    with caplog.at_level("WARNING", logger="simlidar.bag"):
+        b = open_sequence(path)  # no sensor: no table to map laser ids, so no ring
+    assert b[0].ring is None and "not ordered by elevation" in caplog.text
+
+
+def test_ground_truth_interpolated_between_odometry_messages(seq, tmp_path):
+    """Ground truth at another rate than the clouds: poses taken on SE(3) between the neighbouring messages."""
+    traj = constant_velocity(v=(1.0, 0.2, 0.0), yaw_rate=0.1, start=(-2.0, 0.5, 0.0))
+    gt_times = np.arange(-0.013, 0.3, 0.02)  # 50 Hz, not aligned with the sweeps
+    odometry = [(int(round((DEFAULT_EPOCH_S + t) * 1e9)), P) for t, P in zip(gt_times, traj.pose_at(gt_times),
+                                                                             strict=True)]
+    records = [point_record(seq[k], truth=False) for k in range(3)]
+    path = write_cloud_bag(tmp_path / "gt_rate", records, [stamp_ns(seq, k) for k in range(3)], odometry=odometry)
+    b = open_sequence(path)
+    assert b.ground_truth_topic == "/ground_truth/odometry"
+    # constant world velocity while yawing is not a constant screw: the interpolation is good to ~0.02 mm here
+    assert np.allclose(b.poses, seq.poses[:3], atol=1e-4)  # the nearest message would be 1 cm off
