@@ -6,7 +6,6 @@ A thin command over ``tools.export``. Register it in ``tools/cli.py`` with
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 
@@ -23,7 +22,6 @@ def add_commands(subparsers) -> None:
         "/ground_truth/odometry and /tf (map -> lidar); needs the optional 'rosbags' package. ply / pcd: a "
         "folder of one file per frame with the same fields, sensor.yaml, poses.txt and times.txt. tum: the "
         "ground-truth trajectory (timestamp tx ty tz qx qy qz qw), readable by evo.",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("sequence", type=Path, help="sequence folder, or ROS 2 bag (folder, .mcap or .db3)")
     p.add_argument("--format", required=True, choices=FORMATS, help="what to write")
