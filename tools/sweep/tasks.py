@@ -1,0 +1,246 @@
+"""The two task functions every executor runs: simulate a sequence, run one odometry on it.
+
+Both are plain top-level functions of picklable arguments returning JSON-able
+dicts, so local processes and Dask workers run the very same code. Neither
+raises for a failure of the run itself: the error goes into the returned
+result (and the run's ``result.json``), so one bad run does not stop a sweep.
+Workers must see the store's folder (for Dask: a shared filesystem).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import platform
+import shlex
+import socket
+import subprocess
+import time
+import traceback
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from odometry.config import OdometryConfig
+from simlidar.dataset import atomic_write_text
+from simlidar.sensor import LidarModel
+
+from .store import PARAMS_FILE, Store
+
+log = logging.getLogger(__name__)
+
+COMMAND_LOG = "command.log"
+DEFAULT_COMMAND_TIMEOUT_S = 3600.0
+
+
+@dataclass(frozen=True)
+class SimJob:
+    """Simulate one sequence into the store (or find it there).
+
+    scene_overrides: scene parameters (speed included); sensor: the model with
+    its noise; frames: sweeps; start_s: path time of the first sweep, s.
+    """
+
+    store: str
+    sim_key: str
+    scene: str
+    seed: int
+    scene_overrides: dict
+    sensor: LidarModel
+    frames: int
+    start_s: float
+    motion_distortion: bool
+
+
+@dataclass(frozen=True)
+class RunJob:
+    """Run one odometry (a config, or an external command template) over a simulated sequence."""
+
+    store: str
+    key: str
+    sim_key: str
+    params: dict
+    config: OdometryConfig | None
+    command: str | None = None
+    command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
+    workdir: str | None = None  # where an external command runs (the sweep's working folder)
+
+
+def versions() -> dict:
+    """Versions that can change a result: this package, numpy, scipy, Python."""
+    import numpy
+    import scipy
+
+    try:
+        from importlib.metadata import version
+
+        package = version("salo-bench")
+    except Exception:  # not installed as a distribution (a bare checkout)
+        from simlidar import __version__ as package
+    return {"package_version": package, "numpy_version": numpy.__version__, "scipy_version": scipy.__version__,
+            "python_version": platform.python_version()}
+
+
+def _now_utc() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def _error_text(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+# ---------------------------------------------------------------- simulation
+def simulate_task(job: SimJob, threads: int | None = None) -> dict:
+    """Make sure the job's sequence exists in the store; simulate it if not.
+
+    threads: Embree threads for this task (None: all cores; give cores / workers
+    when several tasks share a machine). The result never depends on it.
+    Returns ``{"sim_key", "ok", "error", "simulate_s", "cached", "path"}``.
+    """
+    store = Store(job.store)
+    out = store.sequence_dir(job.sim_key)
+    outcome = {"sim_key": job.sim_key, "ok": True, "error": None, "cached": True, "path": str(out)}
+    if store.sequence_ready(job.sim_key):
+        outcome["simulate_s"] = store.sequence_info(job.sim_key).get("simulate_s")
+        return outcome
+    t0 = time.perf_counter()
+    try:
+        _simulate(job, out, threads)
+    except Exception as exc:
+        log.warning("simulation %s failed: %s", job.sim_key, exc)
+        return {**outcome, "ok": False, "cached": False, "error": f"simulation: {_error_text(exc)}",
+                "simulate_s": time.perf_counter() - t0}
+    seconds = time.perf_counter() - t0
+    info = {"sim_key": job.sim_key, "scene": job.scene, "seed": job.seed, "scene_overrides": job.scene_overrides,
+            "sensor": job.sensor.name, "noise_std_m": job.sensor.range_noise_std_m, "frames": job.frames,
+            "start_s": job.start_s, "simulate_s": seconds, "host": socket.gethostname(), "finished_utc": _now_utc()}
+    atomic_write_text(store.sequence_info_path(job.sim_key), json.dumps(info, indent=1, sort_keys=True) + "\n")
+    return {**outcome, "cached": False, "simulate_s": seconds}
+
+
+def _simulate(job: SimJob, out: Path, threads: int | None) -> None:
+    from simlidar.simulate import simulate_sequence
+    from simlidar.sweep import SweepSimulator
+    from tools.cli_scenes import build_world_and_trajectory
+
+    world, trajectory, info = build_world_and_trajectory(job.scene, job.seed, job.scene_overrides)
+    info["scene_seed"] = info.pop("seed")
+    available = int((trajectory.duration_s - job.start_s) / job.sensor.sweep_period_s)
+    if job.frames > available:
+        raise ValueError(f"scene {job.scene}: its path lasts {trajectory.duration_s:.1f} s, room for {available} "
+                         f"sweeps after start_s {job.start_s:g} s, not {job.frames}")
+    sim = SweepSimulator(world, job.sensor, seed=job.seed, motion_distortion=job.motion_distortion, threads=threads)
+    # force: a folder without a manifest here is debris (a complete one was caught above).
+    simulate_sequence(world, trajectory, job.sensor, out, frames=job.frames, seed=job.seed, t_start=job.start_s,
+                      motion_distortion=job.motion_distortion, simulator=sim, force=True,
+                      info={**info, "command": "sweep", "sim_key": job.sim_key,
+                            "noise_std_m": job.sensor.range_noise_std_m})
+
+
+# ---------------------------------------------------------------- odometry run
+def failed_result(job: RunJob, error: str, timings: dict | None = None) -> dict:
+    """The result of a run that did not produce figures; ``error`` says why."""
+    return {"key": job.key, "sim_key": job.sim_key, "params": job.params, "status": "failed", "error": error,
+            "metrics": {}, "diagnostics": {}, "timings": timings or {}, "versions": versions(),
+            "host": socket.gethostname(), "finished_utc": _now_utc()}
+
+
+def run_task(job: RunJob, sim: dict) -> dict:
+    """Run the odometry of ``job`` over the sequence ``sim`` (``simulate_task``'s outcome), evaluate, commit.
+
+    Writes the artifacts into ``runs/<key>/`` (``params.json`` first, ``result.json``
+    last and atomically) and returns the result dict: ``key``, ``sim_key``, ``params``,
+    ``status`` ("ok" | "failed"), ``error``, ``metrics`` (``TrajectoryMetrics.to_dict``),
+    ``diagnostics`` (frame counts), ``timings`` (s), ``versions``, ``host``, ``finished_utc``.
+    """
+    store = Store(job.store)
+    t_start = time.perf_counter()
+    timings = {"simulate_s": sim.get("simulate_s"), "sim_cached": bool(sim.get("cached"))}
+    run_dir = store.run_dir(job.key)
+    try:
+        if not sim.get("ok"):
+            raise _Failure(sim.get("error") or "simulation failed")
+        run_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(run_dir / PARAMS_FILE, json.dumps(
+            {"key": job.key, "sim_key": job.sim_key, "params": job.params, "sequence": sim["path"],
+             "config": None if job.config is None else job.config.to_dict(), "command": job.command},
+            indent=1, sort_keys=True) + "\n")
+        result = _run_and_evaluate(job, Path(sim["path"]), run_dir, timings)
+    except Exception as exc:
+        error = str(exc) if isinstance(exc, _Failure) else _error_text(exc)
+        if not isinstance(exc, _Failure):
+            run_dir.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(run_dir / "error.txt", traceback.format_exc())
+        result = failed_result(job, error, timings)
+    result["timings"]["run_s"] = time.perf_counter() - t_start
+    store.write_result(result)
+    return result
+
+
+class _Failure(Exception):
+    """A run failure whose message is already user-facing (no exception type prefix)."""
+
+
+def _run_and_evaluate(job: RunJob, sequence_dir: Path, run_dir: Path, timings: dict) -> dict:
+    from odometry.metrics import evaluate_trajectory
+    from odometry.pipeline import run_sequence, write_diagnostics_csv, write_kitti_poses
+    from simlidar.dataset import open_sequence, read_kitti_poses
+
+    seq = open_sequence(sequence_dir)
+    poses_path = run_dir / "poses.txt"
+    diagnostics = {}
+    t0 = time.perf_counter()
+    if job.command is not None:
+        run_external(job.command, sequence_dir, poses_path, run_dir / COMMAND_LOG, job.command_timeout_s,
+                     job.workdir)
+        T_est = read_kitti_poses(poses_path)
+        if len(T_est) != len(seq):
+            raise _Failure(f"external odometry wrote {len(T_est)} poses to {poses_path}, the sequence has "
+                           f"{len(seq)} frames")
+    else:
+        run = run_sequence(seq, job.config)
+        T_est = run.poses
+        write_kitti_poses(poses_path, T_est)
+        write_diagnostics_csv(run_dir / "diagnostics.csv", run.diagnostics)
+        atomic_write_text(run_dir / "config.yaml", job.config.to_yaml())
+        diagnostics = {"extrapolated_frames": sum(d.extrapolated for d in run.diagnostics),
+                       "degenerate_frames": sum(d.degenerate for d in run.diagnostics)}
+    timings["odometry_s"] = time.perf_counter() - t0
+    timings["frames_per_s"] = len(T_est) / timings["odometry_s"] if timings["odometry_s"] > 0 else None
+    t0 = time.perf_counter()
+    metrics = evaluate_trajectory(seq.poses, T_est).to_dict()
+    timings["evaluate_s"] = time.perf_counter() - t0
+    atomic_write_text(run_dir / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+    return {"key": job.key, "sim_key": job.sim_key, "params": job.params, "status": "ok", "error": None,
+            "metrics": metrics, "diagnostics": diagnostics, "timings": timings, "versions": versions(),
+            "host": socket.gethostname(), "finished_utc": _now_utc()}
+
+
+def run_external(template: str, sequence_dir: Path, poses_out: Path, log_path: Path,
+                 timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S, workdir: str | None = None) -> None:
+    """Run an external odometry: ``template`` with ``{sequence}`` and ``{out}`` filled in, through the shell.
+
+    The command reads the sequence folder and writes KITTI poses (one 3x4
+    row-major line per frame) to ``{out}``. Its stdout and stderr go to
+    ``log_path``. A non-zero exit, a timeout or no output file is a failure
+    whose message quotes the command's last lines.
+    """
+    command = template.replace("{sequence}", shlex.quote(str(sequence_dir))).replace(
+        "{out}", shlex.quote(str(poses_out)))
+    poses_out.unlink(missing_ok=True)
+    with open(log_path, "w") as log_file:
+        log_file.write(f"$ {command}\n")
+        log_file.flush()
+        try:
+            proc = subprocess.run(command, shell=True, cwd=workdir, stdout=log_file, stderr=subprocess.STDOUT,
+                                  timeout=timeout_s, stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            raise _Failure(f"external odometry timed out after {timeout_s:g} s: {command}") from None
+    if proc.returncode != 0:
+        tail = " | ".join(log_path.read_text().strip().splitlines()[-3:])
+        raise _Failure(f"external odometry exited with status {proc.returncode}: {tail}")
+    if not poses_out.is_file():
+        raise _Failure(f"external odometry wrote no poses to {poses_out} (command: {command})")
+
+
+__all__ = ["RunJob", "SimJob", "failed_result", "run_external", "run_task", "simulate_task", "versions"]
