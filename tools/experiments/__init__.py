@@ -1,0 +1,17 @@
+"""The experiments of the SALO paper, on simulated data (``salo experiment ...``).
+
+One module per idea:
+
+- ``records``:       run folders: provenance (``run.json``), JSON / CSV / Markdown writers.
+- ``suite``:         the simulated sequences an experiment runs on, cached on disk by parameters.
+- ``peer``:          KISS-ICP (optional extra ``peer``) through its Python API, poses at sweep start.
+- ``truth``:         true correspondences between two scans, from the simulator's sidecar.
+- ``table``:         Table I: mean / std of the relative error per 100 m, BL / NCF / SALO / KISS-ICP.
+- ``rejector_study``: Sec. IV-A / Fig. 3: GCR against the distance rejector from perturbed guesses.
+- ``ncf_study``:     NCF's predicted normal uncertainty against the true normal error.
+- ``plots``:         every figure (matplotlib, imported inside the functions).
+- ``report``:        one HTML or Markdown page from a results folder.
+
+Library code logs and shows optional progress bars; the commands
+(``tools.cli_experiment``) and ``tools.demo`` print.
+"""
