@@ -1,0 +1,299 @@
+"""The experiment commands of ``salo``: ``experiment table|rejectors|ncf`` and ``report``.
+
+Thin commands over ``tools.experiments``: parse, build the parameters, run the
+library call, write the run folder, print where it went. Register them on the
+main parser with ``add_commands(subparsers)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+DEFAULT_ROOT = Path("out/experiments")
+DEFAULT_CACHE = DEFAULT_ROOT / "sequences"
+
+
+def add_commands(subparsers) -> None:
+    """Register ``experiment`` (with sub-commands table, rejectors, ncf) and ``report``."""
+    p = subparsers.add_parser(
+        "experiment",
+        help="the SALO paper's experiments on simulated data (table, rejectors, ncf)",
+        description="Run one of the paper's experiments on simulated sequences. Each writes a run folder "
+        "(run.json with the command, parameters, seeds and version; results.json; CSV and Markdown tables; "
+        "PNG figures; summary.md). Sequences are simulated once and cached by their parameters (--cache).",
+    )
+    sub = p.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
+    _add_table(sub)
+    _add_rejectors(sub)
+    _add_ncf(sub)
+    r = subparsers.add_parser(
+        "report",
+        help="gather an experiment's tables and figures into one HTML or Markdown page",
+        description="Collect the summary.md, tables and PNG figures of a run folder (or of every run folder "
+        "under RESULTS_DIR) into one page: HTML with the images embedded (self-contained), or Markdown "
+        "linking the images by relative path.",
+    )
+    r.add_argument("results", type=Path, metavar="RESULTS_DIR", help="a run folder or a folder of run folders")
+    r.add_argument("--format", choices=("html", "md"), default="html", help="page format (default html)")
+    r.add_argument("--out", type=Path, help="output file (default RESULTS_DIR/report.html or report.md)")
+    r.set_defaults(func=cmd_report)
+
+
+def _common(p, name: str) -> None:
+    p.add_argument("--out", type=Path, default=DEFAULT_ROOT / name, help=f"run folder (default {DEFAULT_ROOT / name})")
+    p.add_argument("--cache", type=Path, default=DEFAULT_CACHE,
+                   help=f"simulated sequences, reused when their parameters match (default {DEFAULT_CACHE})")
+    p.add_argument("--quick", action="store_true", help="a small, fast run (minutes -> seconds): for trying it out")
+    p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override an odometry parameter for every method (repeatable), e.g. match_target=raw")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
+
+
+def _sequence_args(p, default_text: str) -> None:
+    p.add_argument("--sequences", help=f"comma-separated SCENE[:SEED[:FRAMES]] (default {default_text})")
+    p.add_argument("--frames", type=int, help="frames per sequence (default 300; --quick 25)")
+    p.add_argument("--sensor", default="salo32", help="sensor preset or YAML (default salo32)")
+    p.add_argument("--noise-std", type=float, default=0.02, help="range noise, 1 sigma, m (default 0.02)")
+    p.add_argument("--start", type=float, help="time along each path of the first sweep, s (default 0; --quick 10)")
+
+
+def _add_table(sub) -> None:
+    p = sub.add_parser(
+        "table",
+        help="Table I: mean / std of the relative error per 100 m, BL / NCF / SALO / KISS-ICP",
+        description="Run BL, NCF and SALO (and KISS-ICP when the peer extra is installed) over a suite of "
+        "simulated sequences and tabulate the paper's figure: translational error of 100 m segments in m per "
+        "100 m, mean and standard deviation per sequence and overall; plus KITTI %, ATE, RPE, each sequence's "
+        "degeneracy summary and top-down trajectory plots (Fig. 4).",
+    )
+    _common(p, "table")
+    _sequence_args(p, "city:1,city:2,city:3,tunnel:1,highway:1,open:1")
+    p.add_argument("--methods", default="bl,ncf,salo,kiss-icp", help="comma-separated (default all four)")
+    p.add_argument("--segment-length", type=float, help="segment length, m (default 100; --quick 10)")
+    p.add_argument("--step-frames", type=int, help="frames between segment starts (default 10; --quick 5)")
+    p.set_defaults(func=cmd_table)
+
+
+def _add_rejectors(sub) -> None:
+    p = sub.add_parser(
+        "rejectors",
+        help="Sec. IV-A / Fig. 3: GCR against the distance rejector from perturbed initial guesses",
+        description="Register scan pairs from noisy initial guesses (rotation about a random axis by an angle "
+        "uniform in [-l_r, l_r], translation along a random axis uniform in [-l_t, l_t]) with the distance "
+        "rejector and with GCR, against the filtered and the raw previous scan; translation-error box plots "
+        "per level, and each rejector's precision and recall against the true correspondences.",
+    )
+    _common(p, "rejectors")
+    _sequence_args(p, "city:1,city:2,city:3 (the table's)")
+    p.add_argument("--pairs", type=int, help="scan pairs (default 100, the paper's; --quick 4)")
+    p.add_argument("--levels", help="comma-separated L_R_DEG:L_T_M (default 0:0,1:0.1,3:0.3,5:0.5,10:1)")
+    p.add_argument("--targets", default="filtered,raw", help="match targets (default filtered,raw)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the pair and noise draws (default 0)")
+    p.set_defaults(func=cmd_rejectors)
+
+
+def _add_ncf(sub) -> None:
+    p = sub.add_parser(
+        "ncf",
+        help="NCF on known noise: predicted normal std against the true normal error",
+        description="Predicted normal uncertainty (NCF) against the actual angle to the true normal, binned "
+        "(calibration); kept share and errors of kept / rejected points as c_tau varies; isotropic against "
+        "beam-aligned noise; over several range-noise levels.",
+    )
+    _common(p, "ncf")
+    p.add_argument("--scans", help="comma-separated SCENE[:SEED] (default city:1,city:2,tunnel:1,open:1)")
+    p.add_argument("--sensor", default="salo32", help="sensor preset or YAML (default salo32)")
+    p.add_argument("--noise-levels", help="comma-separated range noise sigmas, m (default 0.005,0.01,0.02,0.04)")
+    p.add_argument("--max-points", type=int, help="subsample ICP points per scan (default all; --quick 1500)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the subsampling (default 0)")
+    p.set_defaults(func=cmd_ncf)
+
+
+# ---------------------------------------------------------------- helpers
+def _error(message: str) -> Exception:
+    from tools.cli import CommandError  # late: tools.cli imports this module
+
+    return CommandError(message)
+
+
+def _config_overrides(pairs: list[str]) -> tuple:
+    from odometry.config import ConfigError, variant
+    from tools.cli import parse_assignments
+
+    changes = parse_assignments(pairs)
+    try:
+        variant("salo").replace(**changes)  # validate once, with the message naming the key
+    except (ConfigError, TypeError) as exc:
+        raise _error(f"--set: {exc}") from None
+    return tuple(sorted(changes.items()))
+
+
+def _specs(text: str | None, default: list, args, quick_frames: int, start_default: float = 0.0) -> tuple:
+    from tools.experiments.suite import parse_spec
+
+    frames = args.frames or (quick_frames if args.quick else None)
+    start = args.start if args.start is not None else (10.0 if args.quick else start_default)
+    common = {"sensor": args.sensor, "noise_std_m": args.noise_std, "start_s": start}
+    try:
+        if text:
+            specs = [parse_spec(t.strip(), **common, **({"frames": frames} if frames else {}))
+                     for t in text.split(",") if t.strip()]
+        else:
+            specs = [s.with_changes(**common, **({"frames": frames} if frames else {})) for s in default]
+    except ValueError as exc:
+        raise _error(str(exc)) from None
+    return tuple(specs)
+
+
+def _command_line() -> list[str]:
+    return ["salo", *sys.argv[1:]]
+
+
+def _finish(record, out: Path) -> None:
+    record.finish()
+    print(f"wrote {out}/ (summary.md, results.json, tables, figures); `salo report {out}` makes one page")
+
+
+# ---------------------------------------------------------------- commands
+def cmd_table(args) -> int:
+    from tools.experiments.records import RunRecord
+    from tools.experiments.suite import table_suite
+    from tools.experiments.table import TableParams, run_table, table_rows, write_table
+
+    default = table_suite()
+    if args.quick and not args.sequences:
+        default = [s for s in default if s.label is None and (s.scene, s.seed) in (("city", 1), ("tunnel", 1))]
+    specs = _specs(args.sequences, default, args, quick_frames=25)
+    try:
+        params = TableParams(
+            sequences=specs,
+            methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
+            segment_length_m=args.segment_length or (10.0 if args.quick else 100.0),
+            step_frames=args.step_frames or (5 if args.quick else 10),
+            config_overrides=_config_overrides(args.config_set),
+        )
+    except ValueError as exc:
+        raise _error(str(exc)) from None
+    record = RunRecord(args.out, "table", params.to_dict(), _command_line()).start()
+    try:
+        result = run_table(params, args.cache, record=record, progress=args.progress)
+    except ValueError as exc:
+        raise _error(str(exc)) from None
+    write_table(result, record)
+    print((args.out / "table.md").read_text(), end="")
+    for row in table_rows(result):
+        if row["method"] == "KISS-ICP" and not row["available"] and row.get("note"):
+            print(f"KISS-ICP: {row['note']}")
+            break
+    _finish(record, args.out)
+    return 0
+
+
+def _parse_levels(text: str) -> tuple:
+    try:
+        levels = tuple((float(a), float(b)) for a, b in (t.split(":") for t in text.split(",") if t.strip()))
+    except ValueError:
+        raise _error(f"--levels {text!r}: expected L_R_DEG:L_T_M pairs, e.g. 1:0.1,3:0.3") from None
+    if not levels or any(a < 0 or b < 0 for a, b in levels):
+        raise _error(f"--levels {text!r}: need at least one non-negative pair")
+    return levels
+
+
+def cmd_rejectors(args) -> int:
+    from tools.experiments.records import RunRecord
+    from tools.experiments.rejector_study import (
+        DEFAULT_LEVELS,
+        TARGETS,
+        RejectorStudyParams,
+        run_rejector_study,
+        write_rejector_study,
+    )
+    from tools.experiments.suite import table_suite
+
+    default = [s for s in table_suite() if s.scene == "city"]
+    if args.quick and not args.sequences:
+        default = default[:1]
+    specs = _specs(args.sequences, default, args, quick_frames=5)
+    targets = tuple(t.strip() for t in args.targets.split(",") if t.strip())
+    if not targets or any(t not in TARGETS for t in targets):
+        raise _error(f"--targets {args.targets!r}: choose from {', '.join(TARGETS)}")
+    levels = _parse_levels(args.levels) if args.levels else (((0.0, 0.0), (5.0, 0.5)) if args.quick
+                                                             else DEFAULT_LEVELS)
+    params = RejectorStudyParams(pairs=args.pairs or (4 if args.quick else 100), levels=levels, targets=targets,
+                                 sequences=specs, seed=args.seed, config_overrides=_config_overrides(args.config_set))
+    record = RunRecord(args.out, "rejectors", params.to_dict(), _command_line()).start()
+    try:
+        result = run_rejector_study(params, args.cache, progress=args.progress)
+    except ValueError as exc:
+        raise _error(str(exc)) from None
+    write_rejector_study(result, record)
+    for kind, f in result.finding.items():
+        print(f"{kind:8s} target at the true pose: GCR precision {f['gcr_precision']:.3f} recall "
+              f"{f['gcr_recall']:.3f}; distance rejector precision {f['distance_precision']:.3f} recall "
+              f"{f['distance_recall']:.3f}")
+    for r in result.error_summary:
+        print(f"{r['level']:>16s}  {r['target']:8s} {r['rejector']:8s}  median t error {r['t_err_median_m']:.4f} m"
+              f"  p90 {r['t_err_p90_m']:.4f} m")
+    _finish(record, args.out)
+    return 0
+
+
+def cmd_ncf(args) -> int:
+    from tools.experiments.ncf_study import DEFAULT_NOISE_LEVELS_M, NcfStudyParams, run_ncf_study, write_ncf_study
+    from tools.experiments.records import RunRecord
+    from tools.experiments.suite import SequenceSpec
+
+    try:
+        if args.scans:
+            scans = []
+            for t in args.scans.split(","):
+                scene, _, seed = t.strip().partition(":")
+                scans.append(SequenceSpec(scene, int(seed or 0), frames=2, start_s=10.0, sensor=args.sensor))
+        elif args.quick:
+            scans = [SequenceSpec("city", 1, frames=2, start_s=10.0, sensor=args.sensor)]
+        else:
+            scans = [s.with_changes(sensor=args.sensor) for s in NcfStudyParams().scans]
+        levels = (tuple(float(x) for x in args.noise_levels.split(",")) if args.noise_levels
+                  else ((0.01, 0.02) if args.quick else DEFAULT_NOISE_LEVELS_M))
+    except ValueError:
+        raise _error("--scans SCENE[:SEED],... and --noise-levels S1,S2,... (metres)") from None
+    if any(n <= 0 for n in levels):
+        raise _error("--noise-levels: every level must be > 0 m")
+    params = NcfStudyParams(noise_levels_m=levels, scans=tuple(scans),
+                            max_points_per_scan=args.max_points or (1500 if args.quick else None), seed=args.seed,
+                            config_overrides=_config_overrides(args.config_set))
+    record = RunRecord(args.out, "ncf", params.to_dict(), _command_line()).start()
+    result = run_ncf_study(params, args.cache, progress=args.progress)
+    write_ncf_study(result, record)
+    for r in result.overview:
+        print(f"{r['model']:9s} noise {1000 * r['noise_std_m']:4g} mm: {r['points']} points, median error "
+              f"{r['error_median_deg']:.2f} deg, single-surface median Mahalanobis^2 "
+              f"{r['single_surface_mahalanobis2_median']:.2f} (1.39 = calibrated), within 95 % bound "
+              f"{r['single_surface_within_95']:.2f}")
+    _finish(record, args.out)
+    return 0
+
+
+def cmd_report(args) -> int:
+    from tools.experiments.report import ReportError, write_report
+
+    out = args.out or args.results / f"report.{args.format}"
+    try:
+        path = write_report(args.results, out, fmt=args.format)
+    except ReportError as exc:
+        raise _error(str(exc)) from None
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover - usable before tools/cli.py registers it
+    import logging
+
+    parser = argparse.ArgumentParser(prog="salo")
+    parser.add_argument("-v", "--verbose", action="store_true")
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    ns = parser.parse_args()
+    logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING)
+    sys.exit(ns.func(ns))
