@@ -221,6 +221,9 @@ def test_rejector_study_files_and_values(rejector_run):
         f = result.finding[target]
         assert f["gcr_recall"] == pytest.approx(at_truth[(target, "gcr")]["recall"])
         assert f["true_match_distance_median_m"] > 0
+        bins = f["by_incidence"]
+        assert bins[0]["incidence_lo_deg"] == 0 and bins[-1]["incidence_hi_deg"] >= 90
+        assert sum(b["true_matches_sampled"] for b in bins) > 0
     # Raw returns are denser than voxel centroids: true matches are closer to their target point.
     assert result.finding["raw"]["true_match_distance_median_m"] < result.finding["filtered"][
         "true_match_distance_median_m"]

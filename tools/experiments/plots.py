@@ -256,31 +256,42 @@ def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Pat
     return _save(fig, path)
 
 
-def match_distance_histogram(path, samples: dict) -> Path:
-    """Per target: distances of true matches at the true pose against the GCR thresholds of their sources, m."""
+def match_distance_histogram(path, samples: dict, head_on_deg: float = 45.0) -> Path:
+    """Per target: distances of true matches at the true pose against the GCR thresholds of their sources, m.
+
+    Top row: every true match; bottom row: sources seen within ``head_on_deg`` of
+    the surface normal, where the threshold is the sensor's sampling spacing.
+    """
     targets = list(samples)
-    fig = _figure(figsize=(6.0 * len(targets), 5.0))
-    axes = np.atleast_1d(fig.subplots(1, len(targets), sharey=True))
+    fig = _figure(figsize=(6.0 * len(targets), 8.6))
+    axes = np.array(fig.subplots(2, len(targets), sharey="row", sharex=True)).reshape(2, len(targets))
     top = 3.0
     bins = np.logspace(-3, math.log10(top), 56)
-    for ax, t in zip(axes, targets, strict=True):
-        d = np.asarray(samples[t]["distance_m"], dtype=float)
-        thr = np.asarray(samples[t]["gcr_threshold_m"], dtype=float)
-        if len(d):
-            kept = float(np.mean(d < thr))
-            # Weights 1/n: the bar heights are shares of the matches, comparable across log-spaced bins.
-            ax.hist(np.clip(d, bins[0], top * 0.999), bins=bins, weights=np.full(len(d), 1 / len(d)), alpha=0.6,
-                    color="tab:red", label=f"distance to the nearest target point (median {np.median(d) * 100:.1f} cm)")
-            ax.hist(np.clip(thr, bins[0], top * 0.999), bins=bins, weights=np.full(len(thr), 1 / len(thr)), alpha=0.6,
-                    color="tab:green", label=f"GCR threshold max d_kl (median {np.median(thr) * 100:.1f} cm)")
-            ax.set_title(f"{t} target, at the true pose: GCR keeps {100 * kept:.1f} % of {len(d)} true matches",
-                         fontsize=10)
-        ax.set_xscale("log")
-        ax.set_xlabel(f"distance, m (log; values above {top:g} m, e.g. grazing incidence, in the last bin)")
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper left", fontsize=8.5)
-    axes[0].set_ylabel("share of the true matches per bin")
-    fig.suptitle("True correspondences: match distance against the GCR threshold of the same source point")
+    for col, t in enumerate(targets):
+        d_all = np.asarray(samples[t]["distance_m"], dtype=float)
+        thr_all = np.asarray(samples[t]["gcr_threshold_m"], dtype=float)
+        inc = np.asarray(samples[t].get("incidence_deg", np.zeros(len(d_all))), dtype=float)
+        for row, (sel, what) in enumerate(((np.ones(len(d_all), bool), "all true matches"),
+                                           (inc < head_on_deg, f"sources within {head_on_deg:g} deg of head-on"))):
+            ax = axes[row, col]
+            d, thr = d_all[sel], thr_all[sel]
+            if len(d):
+                # Weights 1/n: bar heights are shares of the matches, comparable across log-spaced bins.
+                w = np.full(len(d), 1 / len(d))
+                ax.hist(np.clip(d, bins[0], top * 0.999), bins=bins, weights=w, alpha=0.6, color="tab:red",
+                        label=f"distance to the nearest target point (median {np.median(d) * 100:.1f} cm)")
+                ax.hist(np.clip(thr, bins[0], top * 0.999), bins=bins, weights=w, alpha=0.6, color="tab:green",
+                        label=f"GCR threshold max d_kl (median {np.median(thr) * 100:.1f} cm)")
+                ax.set_title(f"{t} target, {what}:\nGCR keeps {100 * float(np.mean(d < thr)):.1f} % of "
+                             f"{len(d)} sampled true matches", fontsize=10)
+            ax.set_xscale("log")
+            ax.grid(True, alpha=0.3)
+            ax.legend(loc="upper left", fontsize=8.5)
+        axes[1, col].set_xlabel(f"distance, m (log; above {top:g} m, e.g. grazing incidence, in the last bin)")
+    for row in range(2):
+        axes[row, 0].set_ylabel("share of the true matches per bin")
+    fig.suptitle("True correspondences at the true pose: match distance against the GCR threshold of the same "
+                 "source point")
     return _save(fig, path)
 
 

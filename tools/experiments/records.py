@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
 import io
 import json
 import math
@@ -49,16 +50,25 @@ def package_version() -> str:
 
 
 def git_state(repo_dir: str | Path | None = None) -> dict | None:
-    """``{"commit", "dirty"}`` of the checkout holding this package, or None outside git."""
+    """The checkout holding this package: commit, whether tracked files differ from it, which, and the
+    sha256 of that difference (``git diff HEAD``), so a run made on uncommitted code can still be matched
+    to the code it ran. None outside git."""
     repo = Path(repo_dir) if repo_dir is not None else Path(__file__).resolve().parents[2]
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=repo, capture_output=True, text=True, timeout=20,
+                              check=True).stdout
+
     try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=repo, capture_output=True, text=True,
-                                timeout=10, check=True).stdout.strip()
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=repo,
-                                capture_output=True, text=True, timeout=10, check=True).stdout
+        commit = git("rev-parse", "HEAD").strip()
+        changed = [line[3:] for line in git("status", "--porcelain", "--untracked-files=no").splitlines()]
+        diff = git("diff", "HEAD") if changed else ""
     except (OSError, subprocess.SubprocessError):
         return None
-    return {"commit": commit, "dirty": bool(status.strip())}
+    out = {"commit": commit, "dirty": bool(changed)}
+    if changed:
+        out.update(changed_files=changed, diff_sha256=hashlib.sha256(diff.encode()).hexdigest())
+    return out
 
 
 def to_jsonable(value: Any) -> Any:

@@ -54,7 +54,9 @@ log = logging.getLogger(__name__)
 DEFAULT_LEVELS = ((0.0, 0.0), (1.0, 0.1), (3.0, 0.3), (5.0, 0.5), (10.0, 1.0))
 REJECTORS = ("distance", "gcr")
 TARGETS = ("filtered", "raw")
-# Matches whose distance is stored per pair for the histogram (a subsample keeps files small).
+# Incidence angle bins (beam against the true surface normal, deg; 90 = grazing) of the GCR breakdown.
+INCIDENCE_BINS_DEG = ((0.0, 45.0), (45.0, 70.0), (70.0, 80.0), (80.0, 85.0), (85.0, 90.01))
+# True matches whose distance is stored per pair for the histogram (a subsample keeps files small).
 _DISTANCE_SAMPLES_PER_PAIR = 1500
 
 
@@ -207,8 +209,10 @@ def rejection_counts(source, target, T: np.ndarray, src_truth: PointTruth, tgt_t
                      T_true: np.ndarray, criteria: TruthCriteria, chains: dict) -> tuple[dict, np.ndarray, np.ndarray]:
     """Counts per chain over the unbounded nearest-neighbour candidates at pose T.
 
-    Returns ({chain: {candidates, true, kept, kept_true}}, (t,) distances of the
-    true candidates, m, (t,) GCR thresholds of their source points, m).
+    Returns ({chain: {candidates, true, kept, kept_true}}, and for the t true
+    candidates a dict of (t,) arrays: "distance_m" (match distance),
+    "gcr_threshold_m" (their source point's threshold), "incidence_deg" (angle
+    between the source point's beam and its true surface normal, 90 = grazing)).
     """
     from odometry.rejectors import Matches
 
@@ -221,8 +225,12 @@ def rejection_counts(source, target, T: np.ndarray, src_truth: PointTruth, tgt_t
         keep = chain_keep(m, source, chain)
         counts[name] = {"candidates": len(m), "true": int(is_true.sum()), "kept": int(keep.sum()),
                         "kept_true": int((keep & is_true).sum())}
-    thr = source.gcr_threshold_m[m.source_index[is_true]]
-    return counts, m.distance_m[is_true], thr
+    src = m.source_index[is_true]
+    beam = source.points[src] / np.linalg.norm(source.points[src], axis=1, keepdims=True)
+    cos_inc = np.abs(np.einsum("ij,ij->i", beam, src_truth.normal[src]))
+    true_stats = {"distance_m": m.distance_m[is_true], "gcr_threshold_m": source.gcr_threshold_m[src],
+                  "incidence_deg": np.degrees(np.arccos(np.clip(cos_inc, 0.0, 1.0)))}
+    return counts, true_stats
 
 
 def _ratio(a: float, b: float) -> float:
@@ -277,7 +285,7 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progr
         "salo_chain": rejectors_for(configs["gcr"]),
     }
     regs, rej, pair_rows = [], [], []
-    samples = {t: {"distance_m": [], "gcr_threshold_m": []} for t in params.targets}
+    samples = {t: {"distance_m": [], "gcr_threshold_m": [], "incidence_deg": []} for t in params.targets}
     for p_idx, (s_idx, k) in enumerate(tqdm(chosen, desc="rejector study", unit="pair", disable=not progress,
                                             dynamic_ncols=True)):
         seq, spec = sequences[s_idx], params.sequences[s_idx]
@@ -298,19 +306,19 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progr
         for kind in params.targets:
             target, tgt_truth = make_target(tgt_scan, kind, prep_config)
             common = {"pair": p_idx, "sequence": spec.name, "source_frame": k, "target": kind}
-            counts, d_true, thr_true = rejection_counts(source, target, T_true, src_scan.truth, tgt_truth, T_true,
-                                                        criteria, pr_chains)
-            take = np.random.default_rng([params.seed, p_idx, 7]).permutation(len(d_true))[
-                :_DISTANCE_SAMPLES_PER_PAIR]
-            samples[kind]["distance_m"].extend(d_true[take].tolist())
-            samples[kind]["gcr_threshold_m"].extend(thr_true[take].tolist())
+            counts, true_stats = rejection_counts(source, target, T_true, src_scan.truth, tgt_truth, T_true,
+                                                  criteria, pr_chains)
+            n_true = len(true_stats["distance_m"])
+            take = np.random.default_rng([params.seed, p_idx, 7]).permutation(n_true)[:_DISTANCE_SAMPLES_PER_PAIR]
+            for key, values in true_stats.items():
+                samples[kind][key].extend(values[take].tolist())
             for chain, c in counts.items():
                 rej.append({**common, "stage": "true pose", "level": "true pose", "l_r_deg": None, "l_t_m": None,
                             "rejector": chain, **c})
             for (l_r, l_t), (T_init, m_r, m_t) in zip(params.levels, noises, strict=True):
                 level = level_label((l_r, l_t))
                 init_t, init_r = pose_errors(T_true, T_init)
-                counts, _, _ = rejection_counts(source, target, T_init, src_scan.truth, tgt_truth, T_true, criteria,
+                counts, _ = rejection_counts(source, target, T_init, src_scan.truth, tgt_truth, T_true, criteria,
                                                 pr_chains)
                 for chain, c in counts.items():
                     rej.append({**common, "stage": "initial guess", "level": level, "l_r_deg": l_r, "l_t_m": l_t,
@@ -325,7 +333,7 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progr
                                  "iterations": res.iterations, "converged": res.converged,
                                  "singular": res.singular, "matches": res.n_matches})
                     chain = "bl_chain" if name == "distance" else "salo_chain"
-                    c_fin, _, _ = rejection_counts(source, target, res.T_target_source, src_scan.truth, tgt_truth,
+                    c_fin, _ = rejection_counts(source, target, res.T_target_source, src_scan.truth, tgt_truth,
                                                    T_true, criteria, {chain: pr_chains[chain]})
                     rej.append({**common, "stage": "final estimate", "level": level, "l_r_deg": l_r, "l_t_m": l_t,
                                 "rejector": chain, **c_fin[chain]})
@@ -384,7 +392,17 @@ def target_finding(pr_summary: list[dict], samples: dict, targets) -> dict:
         row = {r["rejector"]: r for r in pr_summary if r["stage"] == "true pose" and r["target"] == kind}
         d = np.asarray(samples[kind]["distance_m"])
         thr = np.asarray(samples[kind]["gcr_threshold_m"])
+        inc = np.asarray(samples[kind]["incidence_deg"])
         finite = np.isfinite(thr)
+        by_incidence = []
+        for lo, hi in INCIDENCE_BINS_DEG:
+            sel = (inc >= lo) & (inc < hi)
+            by_incidence.append({
+                "incidence_lo_deg": lo, "incidence_hi_deg": hi, "true_matches_sampled": int(sel.sum()),
+                "gcr_recall": float(np.mean(d[sel] < thr[sel])) if sel.any() else None,
+                "distance_median_m": float(np.median(d[sel])) if sel.any() else None,
+                "gcr_threshold_median_m": float(np.median(thr[sel])) if sel.any() else None,
+            })
         out[kind] = {
             "gcr_precision": row["gcr"]["precision"] if "gcr" in row else None,
             "gcr_recall": row["gcr"]["recall"] if "gcr" in row else None,
@@ -393,6 +411,8 @@ def target_finding(pr_summary: list[dict], samples: dict, targets) -> dict:
             "true_fraction": row["gcr"]["true_fraction"] if "gcr" in row else None,
             "true_match_distance_median_m": float(np.median(d)) if len(d) else None,
             "gcr_threshold_median_m": float(np.median(thr[finite])) if finite.any() else None,
+            "gcr_recall_sampled": float(np.mean(d < thr)) if len(d) else None,
+            "by_incidence": by_incidence,
         }
     return out
 
@@ -469,5 +489,16 @@ def rejector_markdown(result: RejectorStudyResult, params: dict) -> str:
                      f"{fmt(f['distance_precision'], '.3f')}, recall {fmt(f['distance_recall'], '.3f')}); "
                      f"true matches lie a median {fmt(f['true_match_distance_median_m'], '.3f')} m from their "
                      f"nearest target point, GCR thresholds are a median {fmt(f['gcr_threshold_median_m'], '.3f')} m.")
-    lines += ["", "![true-match distances against GCR thresholds](match_distances.png)", ""]
+    lines += ["", "GCR on the true matches at the true pose by the incidence angle of the source point's beam "
+              "on its surface (0 = head-on, 90 = grazing), from a sample of the true matches:", ""]
+    header = ["target", "incidence, deg", "true matches (sample)", "match distance median, m",
+              "GCR threshold median, m", "GCR recall"]
+    rows = []
+    for kind, f in result.finding.items():
+        for b in f["by_incidence"]:
+            rows.append([kind, f"{b['incidence_lo_deg']:g}-{min(b['incidence_hi_deg'], 90):g}",
+                         b["true_matches_sampled"], fmt(b["distance_median_m"], ".3f"),
+                         fmt(b["gcr_threshold_median_m"], ".3f"), fmt(b["gcr_recall"], ".3f")])
+    lines.append(markdown_table(header, rows, "llrrrr"))
+    lines += ["![true-match distances against GCR thresholds](match_distances.png)", ""]
     return "\n".join(lines) + "\n"

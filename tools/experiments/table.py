@@ -178,10 +178,14 @@ class TableResult:
     params: TableParams
     sequences: list[SequenceResult]
 
-    def overall(self, method: str) -> tuple[float, float, int]:
-        """Pooled mean, std (m per 100 m) and segment count of a method over all sequences it ran on."""
+    def well_constrained(self) -> list[str]:
+        """Sequences whose median frame is not weakly constrained (a property of the data, not of the results)."""
+        return [s.spec.name for s in self.sequences if s.degeneracy["t_eig0_median"] >= WEAK_TRANSLATION_EIGENVALUE]
+
+    def overall(self, method: str, names: list[str] | None = None) -> tuple[float, float, int]:
+        """Pooled mean, std (m per 100 m) and segment count of a method over the sequences ``names`` (default all)."""
         errs = [s.methods[method].segment_errors_m for s in self.sequences
-                if method in s.methods and s.methods[method].available]
+                if method in s.methods and s.methods[method].available and (names is None or s.spec.name in names)]
         v = np.concatenate(errs) if errs else np.zeros(0)
         return (float(np.mean(v)), float(np.std(v)), len(v)) if len(v) else (float("nan"), float("nan"), 0)
 
@@ -240,6 +244,13 @@ def table_rows(result: TableResult) -> list[dict]:
         mu, sigma, n = result.overall(m)
         rows.append({"sequence": "overall", "scene": "", "method": METHOD_LABELS[m],
                      "available": n > 0, "mu_m_per_100m": mu, "sigma_m_per_100m": sigma, "segments": n})
+    good = result.well_constrained()
+    if 0 < len(good) < len(result.sequences):
+        for m in result.params.methods:
+            mu, sigma, n = result.overall(m, good)
+            rows.append({"sequence": "overall well-constrained", "scene": "", "method": METHOD_LABELS[m],
+                         "available": n > 0, "mu_m_per_100m": mu, "sigma_m_per_100m": sigma, "segments": n,
+                         "note": "sequences: " + ", ".join(good)})
     return rows
 
 
@@ -253,10 +264,14 @@ def salo_vs_bl(result: TableResult) -> list[dict]:
         out.append({"sequence": s.spec.name, "bl_mu": b, "salo_mu": a, "salo_better": bool(a < b)
                     if math.isfinite(a) and math.isfinite(b) else None,
                     "change_pct": 100.0 * (a - b) / b if math.isfinite(a) and math.isfinite(b) and b > 0 else None})
-    b, a = result.overall("bl")[0], result.overall("salo")[0]
-    out.append({"sequence": "overall", "bl_mu": b, "salo_mu": a,
-                "salo_better": bool(a < b) if math.isfinite(a) and math.isfinite(b) else None,
-                "change_pct": 100.0 * (a - b) / b if math.isfinite(a) and math.isfinite(b) and b > 0 else None})
+    good = result.well_constrained()
+    pools = [("overall", None)] + ([("overall well-constrained", good)] if 0 < len(good) < len(result.sequences)
+                                   else [])
+    for label, names in pools:
+        b, a = result.overall("bl", names)[0], result.overall("salo", names)[0]
+        out.append({"sequence": label, "bl_mu": b, "salo_mu": a,
+                    "salo_better": bool(a < b) if math.isfinite(a) and math.isfinite(b) else None,
+                    "change_pct": 100.0 * (a - b) / b if math.isfinite(a) and math.isfinite(b) and b > 0 else None})
     return out
 
 
@@ -295,6 +310,17 @@ def table_markdown(result: TableResult, params: dict) -> str:
         lines.append(f"\n**Segments are {L:g} m here, not the paper's 100 m** (a quick run): errors are still "
                      "scaled to m per 100 m, but are not comparable with 100 m figures.")
     lines += ["", paper_table_markdown(result)]
+    good = result.well_constrained()
+    if 0 < len(good) < len(result.sequences):
+        weak = [s.spec.name for s in result.sequences if s.spec.name not in good]
+        lines.append(f"Weakly constrained sequences (median smallest translational eigenvalue of the true-normal "
+                     f"information below {WEAK_TRANSLATION_EIGENVALUE:g}, see the degeneracy table): "
+                     f"{', '.join(weak)}. Pooled over the others ({', '.join(good)}):")
+        lines.append("")
+        header = ["Method", "mu, m", "sigma, m", "segments"]
+        rows = [[METHOD_LABELS[m], *(fmt(v) for v in result.overall(m, good)[:2]), result.overall(m, good)[2]]
+                for m in result.params.methods]
+        lines.append(markdown_table(header, rows))
     for m in result.params.methods:
         for s in result.sequences:
             r = s.methods.get(m)
@@ -320,7 +346,7 @@ def table_markdown(result: TableResult, params: dict) -> str:
               "RPE t mean, m", "flagged degenerate", "extrapolated", "frames/s"]
     rows = []
     for r in table_rows(result):
-        if r["sequence"] == "overall" or not r["available"]:
+        if r["sequence"].startswith("overall") or not r["available"]:
             continue
         rows.append([r["sequence"], r["method"], fmt(r["path_length_m"], ".0f"), r["segments"],
                      fmt(r["t_err_pct"], ".3f"), fmt(r["r_err_deg_per_100m"], ".3f"), fmt(r["ate_rmse_m"], ".3f"),
