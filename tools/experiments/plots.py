@@ -66,7 +66,19 @@ def _draw_tracks(ax, gt: np.ndarray, est: dict, errs: dict | None, segment_lengt
         ls, lw = METHOD_STYLES.get(name, ("-", 1.4))
         ax.plot(poses[:, 0, 3], poses[:, 1, 3], color=METHOD_COLORS.get(name), ls=ls, lw=lw, label=label)
     ax.plot(gt[0, 0, 3], gt[0, 1, 3], "ks", ms=7, mfc="none", mew=1.5, label="start")
-    ax.set_aspect("equal", adjustable="datalim")
+    # The view follows the ground truth (with a margin): a diverged estimate must not shrink it to a dot.
+    lo, hi = gt[:, :2, 3].min(axis=0), gt[:, :2, 3].max(axis=0)
+    margin = max(20.0, 0.3 * float(np.max(hi - lo)))
+    lo, hi = lo - margin, hi + margin
+    outside = [name for name, poses in est.items()
+               if np.any(poses[:, :2, 3] < lo) or np.any(poses[:, :2, 3] > hi)]
+    centre, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_aspect("equal", adjustable="box")
+    if outside:
+        ax.text(0.99, 0.01, "leaves the view: " + ", ".join(outside), transform=ax.transAxes, ha="right",
+                va="bottom", fontsize=8.5, color="0.25", bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
     ax.set_xlabel("x, m (first frame: forward)")
     ax.set_ylabel("y, m (first frame: left)")
     ax.grid(True, alpha=0.3)
@@ -75,13 +87,52 @@ def _draw_tracks(ax, gt: np.ndarray, est: dict, errs: dict | None, segment_lengt
 def trajectory_plot(path, gt: np.ndarray, est: dict, errs: dict | None = None, title: str = "",
                     segment_length_m: float = 100.0) -> Path:
     """Top view of ground truth (N, 4, 4) and each method's poses (name -> (N, 4, 4)), in metres."""
-    fig = _figure(figsize=(8.5, 7.5))
+    fig = _figure(figsize=(8.5, 8.6))
     ax = fig.subplots()
     _draw_tracks(ax, gt, est, errs, segment_length_m)
-    ax.legend(loc="best", fontsize=9)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
+    _end_inset(ax, gt, est)
     note = "" if segment_length_m == 100.0 else f" ({segment_length_m:g} m segments)"
     ax.set_title((title or "trajectory, top view") + note)
     return _save(fig, path)
+
+
+def _end_inset(ax, gt: np.ndarray, est: dict) -> None:
+    """A zoom on the end of the path, where the methods' drift shows (tracks overlap at full scale)."""
+    from matplotlib.ticker import MaxNLocator
+
+    end = gt[-1, :2, 3]
+    errs = [float(np.linalg.norm(p[-1, :2, 3] - end)) for p in est.values()]
+    half = min(max(1.0, 1.5 * max(errs, default=0.0)), 25.0)
+    extent = float(np.max(np.ptp(gt[:, :2, 3], axis=0)))
+    if extent < 8 * half:  # the whole path is about as small as the zoom: nothing to add
+        return
+    # The corner of the axes the ground truth crosses least (axes coordinates of its points).
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    u = (gt[:, 0, 3] - x0) / (x1 - x0)
+    v = (gt[:, 1, 3] - y0) / (y1 - y0)
+    size = 0.34
+    corners = [(0.1, 0.05), (0.62, 0.05), (0.1, 0.6), (0.62, 0.6)]
+    crossing = [np.sum((u > cx - 0.03) & (u < cx + size + 0.03) & (v > cy - 0.03) & (v < cy + size + 0.08))
+                for cx, cy in corners]
+    cx, cy = corners[int(np.argmin(crossing))]
+    inset = ax.inset_axes([cx, cy, size, size])
+    inset.plot(gt[:, 0, 3], gt[:, 1, 3], color="black", lw=2.0, ls="--")
+    for name, poses in est.items():
+        ls, lw = METHOD_STYLES.get(name, ("-", 1.4))
+        inset.plot(poses[:, 0, 3], poses[:, 1, 3], color=METHOD_COLORS.get(name), ls=ls, lw=lw)
+        inset.plot(poses[-1, 0, 3], poses[-1, 1, 3], "o", color=METHOD_COLORS.get(name), ms=5)
+    inset.plot(end[0], end[1], "k*", ms=10)
+    inset.set_xlim(end[0] - half, end[0] + half)
+    inset.set_ylim(end[1] - half, end[1] + half)
+    inset.set_aspect("equal", adjustable="box")
+    inset.set_title(f"end of path, +-{half:.1f} m (star: truth)", fontsize=8)
+    inset.tick_params(labelsize=7)
+    inset.xaxis.set_major_locator(MaxNLocator(4))
+    inset.yaxis.set_major_locator(MaxNLocator(4))
+    inset.grid(True, alpha=0.3)
+    ax.indicate_inset_zoom(inset, edgecolor="0.4")
 
 
 def trajectory_grid(path, tracks: list, segment_length_m: float = 100.0) -> Path:

@@ -150,6 +150,9 @@ def run_method(method: str, sequence, params: TableParams, progress: bool) -> Me
                                    on_frame=lambda k: bar.update(1))
             except ImportError as exc:
                 return MethodResult(method, False, str(exc))
+            except Exception as exc:  # noqa: BLE001 - the peer failing must not end a long run; the row says why
+                log.warning("KISS-ICP failed on %s: %s", sequence.path.name, exc)
+                return MethodResult(method, False, f"failed: {type(exc).__name__}: {exc}")
             res = MethodResult(method, True, f"kiss-icp {run.config.get('kiss_icp_version')}", run.poses,
                                frames_per_second=run.frames_per_second)
         else:
@@ -159,6 +162,10 @@ def run_method(method: str, sequence, params: TableParams, progress: bool) -> Me
                                extrapolated=sum(d.extrapolated for d in run.diagnostics))
             res.diagnostics = run.diagnostics
     gt = sequence.poses
+    bad = ~np.all(np.isfinite(res.poses.reshape(len(res.poses), -1)), axis=1)
+    if bad.any():
+        res.available, res.note = False, f"diverged: non-finite pose from frame {int(np.argmax(bad))}"
+        return res
     res.segment_errors_m = segment_errors_per_100m(gt, res.poses, params.segment_length_m, params.step_frames)
     res.metrics.update(evaluate_trajectory(gt, res.poses).to_dict())
     return res
