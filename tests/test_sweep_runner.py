@@ -98,6 +98,9 @@ def test_spec_defaults_and_file(tmp_path):
     spec = load_spec(tmp_path / "s.yaml")
     assert spec.sensors == (str(sensor.resolve()),)
     assert [r.sim.sensor_model.range_noise_std_m for r in spec.runs()] == [0.01, 0.01, 0.04, 0.04]
+    # The documented example: 2 scenes x 2 seeds x 3 noise levels x 3 variants over 12 sequences.
+    example = load_spec(Path(__file__).resolve().parents[1] / "tools/sweep/examples/noise-study.yaml").runs()
+    assert (len(example), len({r.sim_key for r in example})) == (36, 12)
 
 
 def test_run_keys_are_stable_hashes_of_resolved_parameters():

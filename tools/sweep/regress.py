@@ -6,22 +6,30 @@ compared with a committed baseline file; a figure *fails* when it grows past
 
     allowed = baseline + max(relative * |baseline|, floor[figure])
 
-Why this tolerance: the simulation is seeded and byte-identical, and the
-odometry is deterministic, so on one machine two runs give the same figures
-to the last digit (measured: zero difference). What can differ on another
-machine is floating point (BLAS kernels, vector widths, a library's summation
-order), which nudges ICP iterations near their stopping thresholds; the
-absolute floors are several times the change such a nudge makes (measured by
-perturbing the stopping thresholds, see the floors' comments), and the
-relative part lets a genuine but harmless change of a few per cent through
-while any real degradation (a broken rejector, a wrong de-skew: tens of per
-cent to several times) fails. Figures that improve past the tolerance pass
-with a note suggesting ``--update``.
+with relative = 20 % and the floors of ``DEFAULT_FLOORS``. Why this tolerance:
 
-The baseline file (JSON) holds the suite, the tolerance and, per run label,
-the figures; ``--update`` rewrites it from the current results, keeping the
-tolerance. An external odometry (a command that reads a sequence folder and
-writes KITTI poses) is evaluated the same way against its own baseline file.
+- Run to run the figures are identical: the simulation is seeded and
+  byte-identical, the odometry deterministic (measured: the suite run in
+  worker processes and again in one process agrees to the last digit).
+- Another machine can differ in the last bits of floating point (BLAS kernels,
+  vector widths, summation order). Emulated by scaling every point by
+  1 +- 1e-12: the suite's figures moved by at most 0.5 %. So 20 % is forty
+  times that margin, while a real degradation is far larger (dropping the GCR
+  in the forest, salo -> ncf, doubles the KITTI error: +116 %).
+- The floors (a few per cent of the suite's typical figures) only matter
+  when a figure is near zero, where a relative bound alone would be too tight.
+- Degenerate sequences are left out on purpose: in the default tunnel the
+  same 1e-12 perturbation moved BL's rotational error by 140 % (ICP slips
+  along the bore a little differently), so any harmless change of operation
+  order would trip the guard there; and the default highway (signs 400 m
+  apart) currently diverges. They belong in sweeps, not in a CI gate.
+
+Figures that improve past the tolerance pass, with a note suggesting
+``--update``. The baseline file (JSON) holds the suite, the tolerance and,
+per run label, the figures; ``--update`` rewrites it from the current results,
+keeping the tolerance. An external odometry (a command that reads a sequence
+folder and writes KITTI poses) is evaluated the same way against its own
+baseline file.
 """
 
 from __future__ import annotations
@@ -35,17 +43,20 @@ from simlidar.dataset import atomic_write_text
 
 from .spec import SweepSpec, spec_from_dict
 
-# Short sequences (130 sweeps from 7 s on, at 10 m/s: ~130 m, so 100 m segments exist) in three
-# geometries: a city (rich), a tunnel (degenerate along its axis), a highway (sparse, fast).
+# Short sequences (130 sweeps from 7 s on, at 10 m/s: ~130 m, so 100 m segments exist where the path
+# is straight) in three well-conditioned geometries: a city (rich; its turns keep the path under 100 m,
+# so ATE and RPE guard it), a forest road (trunks: where the NCF and GCR matter most), a highway with
+# signs every 40 m and gantries every 120 m (sparse, but constrained along the road).
 SUITE = {
     "name": "regress",
-    "scenes": ["city", "tunnel", "highway"],
+    "scenes": ["city", "forest", "highway"],
     "seeds": [0],
     "sensors": ["salo32"],
     "variants": ["bl", "ncf", "salo"],
     "frames": 130,
     "speed_m_s": 10.0,
     "start_s": 7.0,  # past the start's acceleration (1.5 m/s^2 to 10 m/s)
+    "scene_params": {"highway": {"sign_spacing_m": 40.0, "gantry_spacing_m": 120.0}},
     "keep_sequences": False,
 }
 DEFAULT_BASELINE = Path(__file__).resolve().parents[1] / "regress_baseline.json"

@@ -131,8 +131,10 @@ def run_sweep(
             if on_result is not None:
                 on_result(flatten(result))
 
-        executor.execute(sims, ready, jobs, done)
-        rows = store.write_table(r.key for r in plan.runs)
+        try:
+            executor.execute(sims, ready, jobs, done)
+        finally:  # interrupted too: the table shows every run finished so far
+            rows = store.write_table(r.key for r in plan.runs)
         missing = len(plan.runs) - len(rows)
         if missing:  # cannot happen unless a worker could not write to the store
             log.warning("%d runs have no result in %s (do the workers share its filesystem?)", missing, store.root)

@@ -283,6 +283,9 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
         except SensorError as exc:
             raise fail("sensors", str(exc)) from None
         sensors.append(s)
+    stems = [Path(s).stem for s in sensors]
+    if len(set(stems)) != len(stems):
+        raise fail("sensors", "two sensors have the same name (runs are labelled by the file's stem)")
 
     noise = get("noise_std_m")
     if noise is not None:

@@ -232,7 +232,9 @@ def run_external(template: str, sequence_dir: Path, poses_out: Path, log_path: P
         log_file.write(f"$ {command}\n")
         log_file.flush()
         try:
-            proc = subprocess.run(command, shell=True, cwd=workdir, stdout=log_file, stderr=subprocess.STDOUT,
+            # The sweep's folder, so relative paths in the command work (a remote worker may not have it).
+            cwd = workdir if workdir is not None and Path(workdir).is_dir() else None
+            proc = subprocess.run(command, shell=True, cwd=cwd, stdout=log_file, stderr=subprocess.STDOUT,
                                   timeout=timeout_s, stdin=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
             raise _Failure(f"external odometry timed out after {timeout_s:g} s: {command}") from None
