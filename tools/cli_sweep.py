@@ -283,6 +283,9 @@ def main(argv: list[str] | None = None) -> int:
     except (*cli.USER_ERRORS, cli.CommandError) as exc:
         print(f"salo {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"salo {args.command}: interrupted (run it again to resume)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

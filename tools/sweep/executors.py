@@ -128,11 +128,13 @@ class DaskExecutor:
     Workers need this package installed and the sweep's output folder on a
     shared filesystem (they write the sequences and run folders). A run task
     depends on its sequence's task, so Dask starts it as soon as that is done.
+    sim_threads: Embree threads per simulation; 1 by default because a cluster's
+    parallelism is its worker threads (one per core, usually), None for all cores.
     """
 
     name = "dask"
 
-    def __init__(self, address: str | None = None, client=None, sim_threads: int | None = None):
+    def __init__(self, address: str | None = None, client=None, sim_threads: int | None = 1):
         if address is None and client is None:
             raise ValueError("give the scheduler's address or a dask.distributed Client")
         self.address = address
