@@ -62,7 +62,7 @@ def add_commands(subparsers) -> None:
     p = subparsers.add_parser(
         "regress",
         help="CI regression: a small suite's errors against a committed baseline",
-        description="Run a small fixed suite (short sequences in city, tunnel and highway x every variant) "
+        description="Run a small fixed suite (short sequences in city, forest and highway x every variant) "
         "and compare each run's error figures with a baseline file. Fails (exit 1), naming the run, the "
         "figure and both values, when a figure grows past baseline + max(relative x baseline, floor); the "
         "tolerance is stored in the baseline file. --update rewrites the baseline from this run. With "
