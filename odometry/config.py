@@ -46,6 +46,9 @@ class OdometryConfig:
             (the paper's xi, which it uses as a variance: here it is a std, m).
         ncf_range_noise_std_m: range noise std for the "range" model; None takes
             the sensor's ``range_noise_std_m``.
+        ncf_noise_free_gaps: take the PCA eigen-gaps net of the noise's expected scatter and
+            reject normals the noise alone could explain (``odometry.ncf``); False is the
+            paper's plain linearisation at the observed neighbourhood.
         ncf_max_normal_std_deg: c_tau as an angle: a point is rejected when the
             largest eigenvalue of its normal covariance >= radians(this)^2.
         max_curvature: PCL curvature above which a point is discarded.
@@ -79,13 +82,14 @@ class OdometryConfig:
     """
 
     name: str = "salo"
-    voxel_size_m: float = 0.5
+    voxel_size_m: float = 0.35
     normal_neighbours: int = 12
     ncf: bool = True
     ncf_noise_model: str = "range"
     ncf_point_noise_std_m: float = 0.02
     ncf_range_noise_std_m: float | None = None
-    ncf_max_normal_std_deg: float = 3.0
+    ncf_noise_free_gaps: bool = True
+    ncf_max_normal_std_deg: float = 5.0
     max_curvature: float = 0.05
     min_range_m: float = 2.5
     max_range_m: float = 120.0
@@ -137,7 +141,7 @@ class OdometryConfig:
             fail("gcr_formula", f"must be one of {', '.join(GCR_FORMULAS)}, got {self.gcr_formula!r}")
         if self.match_target not in MATCH_TARGETS:
             fail("match_target", f"must be one of {', '.join(MATCH_TARGETS)}, got {self.match_target!r}")
-        for key in ("ncf", "gcr", "deskew"):
+        for key in ("ncf", "gcr", "deskew", "ncf_noise_free_gaps"):
             if not isinstance(getattr(self, key), bool):
                 fail(key, f"must be true or false, got {getattr(self, key)!r}")
 

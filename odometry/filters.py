@@ -125,6 +125,7 @@ def filter_scan(
         keep, cov = normal_covariance_filter(
             raw_points[est.neighbour_indices], noise,
             c_tau_rad2=math.radians(config.ncf_max_normal_std_deg) ** 2, pca=est,
+            noise_free_gaps=config.ncf_noise_free_gaps,
         )
         normal_std = cov.max_std_rad
     counts["ncf"] = int(keep.sum())

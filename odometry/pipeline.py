@@ -30,7 +30,7 @@ from .config import OdometryConfig
 from .deskew import deskew, redeskew
 from .filters import FilteredScan, filter_scan
 from .gcr import correct_kitti_vertical_angle, gcr_threshold_m, ring_of_points
-from .icp import RegistrationResult, Source, Target, register
+from .icp import RegistrationResult, Source, Target, register, rejectors_for
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +115,7 @@ class Odometry:
         self._motion = np.eye(4)  # last T_{i-1, i}: the constant-velocity guess
         self._last_stamp: float | None = None
         self._last_period: float | None = None
+        self._use_gcr = False
 
     @property
     def last(self) -> FrameDiagnostics | None:
@@ -181,7 +182,11 @@ class Odometry:
         elif diag.too_few_points or self._target is None:
             T = T_guess
         else:
-            result = register(self._source(scan), self._target, T_guess, cfg)
+            # GCR bounds matches by the sensor's sampling spacing (cm to dm), so it needs a
+            # close initial guess; the first registration has no motion to extrapolate and
+            # starts from identity, so it runs without GCR.
+            self._use_gcr = cfg.gcr and len(self.poses) > 1
+            result = register(self._source(scan), self._target, T_guess, cfg, self._rejectors())
             # The de-skew used the previous frame's motion. The estimate responds to the
             # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
             # closer), so plain re-use of the estimate oscillates: move the de-skew motion
@@ -193,7 +198,8 @@ class Odometry:
                 M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(result.T_target_source)))
                 scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, M, period)
                 T_deskew = M
-                result = register(self._source(scan), self._target, result.T_target_source, cfg)
+                result = register(self._source(scan), self._target, result.T_target_source, cfg,
+                                  self._rejectors())
             self._record(diag, result)
             seconds.update(result.seconds)
             T = result.T_target_source
@@ -241,9 +247,12 @@ class Odometry:
             return self._motion.copy()
         return se3.exp(se3.log(self._motion) * (period / self._last_period))
 
+    def _rejectors(self):
+        return rejectors_for(self.config if self._use_gcr else self.config.replace(gcr=False))
+
     def _source(self, scan: FilteredScan) -> Source:
         threshold = None
-        if self.config.gcr:
+        if self._use_gcr:
             threshold = gcr_threshold_m(scan.points, scan.normals, scan.rings, self.sensor,
                                         self.config.gcr_formula, self.config.gcr_noise_floor_m)
             threshold[np.isnan(threshold)] = np.inf  # no neighbour beam to bound the match: keep it

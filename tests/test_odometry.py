@@ -1,0 +1,132 @@
+"""Odometry against the truth the simulator knows: scan pairs, a sequence, and real data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from odometry.config import variant
+from odometry.filters import filter_scan
+from odometry.gcr import gcr_threshold_m
+from odometry.icp import Source, Target, register
+from odometry.metrics import evaluate_trajectory
+from odometry.pipeline import run_sequence
+from simlidar import se3
+from simlidar.dataset import open_sequence
+from simlidar.sensor import load_preset
+from simlidar.simulate import simulate_sequence
+from simlidar.sweep import SweepSimulator
+from tools.cli_scenes import build_world_and_trajectory
+
+SENSOR = load_preset("salo32")  # 2 cm range noise
+
+
+@pytest.fixture(scope="module")
+def city():
+    world, traj, _ = build_world_and_trajectory("city", 0, {})
+    return world, traj
+
+
+def register_pair(a, b, name, init):
+    """Register scan b (source) to scan a (target) with a variant's filters and rejectors."""
+    cfg = variant(name)
+    ta = filter_scan(a.xyz, cfg, a.ring, SENSOR.range_noise_std_m)
+    sb = filter_scan(b.xyz, cfg, b.ring, SENSOR.range_noise_std_m)
+    thr = None
+    if cfg.gcr:
+        thr = gcr_threshold_m(sb.points, sb.normals, sb.rings, SENSOR)
+        thr[np.isnan(thr)] = np.inf
+    return register(Source(sb.points, sb.normals, thr), Target(ta.points, cKDTree(ta.points), ta.normals), init, cfg)
+
+
+@pytest.mark.parametrize("t0", [20.0, 40.0, 60.0])
+def test_scan_pair_recovers_known_transform(city, t0):
+    """Two sweeps 0.1 s apart along the city route, 2 cm noise, no motion distortion.
+
+    The initial guess is the truth perturbed by 10 cm / 0.5 deg, about what the
+    constant-velocity prediction is off by when the car brakes. Every variant must
+    recover the horizontal motion and heading within 1 cm and 0.05 deg. BL must
+    recover all six degrees of freedom to that accuracy. NCF rejects the ground's
+    normals: salo32 sees the ground only beyond 17 m, one ring per neighbourhood,
+    so the range noise alone spans the second axis there. Height, roll and pitch
+    then rest on the few horizontal surfaces seen with several rings, and may not
+    be recovered as well. For NCF and SALO the test asserts that this direction
+    is the one the information matrix reports as weakest, and that its error stays
+    within the initial perturbation.
+    """
+    world, traj = city
+    sim = SweepSimulator(world, SENSOR, seed=5, motion_distortion=False)
+    a, b = sim.sweep(traj, t0, 0), sim.sweep(traj, t0 + 0.1, 1)
+    G = se3.inverse(traj.pose_at(np.array([t0]))[0]) @ traj.pose_at(np.array([t0 + 0.1]))[0]
+    perturb = se3.exp(np.r_[0.06, -0.05, 0.03, np.radians([0.2, -0.2, 0.4])])
+    for name in ("bl", "ncf", "salo"):
+        res = register_pair(a, b, name, G @ perturb)
+        assert not res.singular, name
+        err = se3.log(se3.inverse(G) @ res.T_target_source)  # (x, y, z, roll, pitch, yaw)
+        assert np.hypot(err[0], err[1]) < 0.01, (name, err)
+        assert abs(np.degrees(err[5])) < 0.05, (name, err)
+        if name == "bl":
+            assert np.linalg.norm(err[:3]) < 0.01 and np.degrees(np.linalg.norm(err[3:])) < 0.05, err
+        else:
+            w, V = np.linalg.eigh(res.H[:3, :3])
+            assert abs(V[2, 0]) > 0.95, (name, V[:, 0])  # the weakest translation is vertical
+            assert abs(err[2]) < 0.03 and np.degrees(np.linalg.norm(err[3:5])) < 0.3, (name, err)
+
+
+@pytest.fixture(scope="module")
+def city_sequence(tmp_path_factory, city):
+    """160 sweeps (>= 100 m) of salo32, 2 cm noise, motion distortion on, from 5 s along the route."""
+    world, traj = city
+    out = tmp_path_factory.mktemp("odo") / "city"
+    simulate_sequence(world, traj, SENSOR, out, frames=160, seed=0, t_start=5.0)
+    return open_sequence(out)
+
+
+def test_sequence_salo_with_deskew_below_one_percent(city_sequence):
+    seq = city_sequence
+    gt = seq.poses
+    with_deskew = run_sequence(seq, variant("salo"))
+    m = evaluate_trajectory(gt, with_deskew.poses)
+    assert m.path_length_m > 100 and m.has_relative_errors
+    assert m.t_err_pct < 1.0, m.to_dict()
+    assert all(d.deskewed for d in with_deskew.diagnostics)
+    # the simulator's distortion is real: without de-skew the same method drifts more
+    without = evaluate_trajectory(gt, run_sequence(seq, variant("salo").replace(deskew=False)).poses)
+    assert without.t_err_pct > 2 * m.t_err_pct, (without.t_err_pct, m.t_err_pct)
+    # the diagnostics: 5-15 % of the raw points survive the filters on this data
+    kept = [d.filter_counts["curvature"] / d.filter_counts["raw"] for d in with_deskew.diagnostics]
+    assert 0.05 < np.median(kept) < 0.15
+
+
+@pytest.mark.parametrize("seq_id, bound_cm", [("05", 2.5), ("01", 7.0)])
+def test_real_kitti_per_frame_error(real_data, seq_id, bound_cm):
+    """Real HDL-64E scans. The bounds are 2.5 / 7 cm mean per-frame error; the ground
+    truth itself agrees with independent estimates to ~1 cm on 05 and ~5 cm on 01
+    (data README), and KISS-ICP 1.3.0 scores 1.8 / 5.8 cm."""
+    seq = open_sequence(real_data / "kitti/sequences" / seq_id, sensor="hdl64e")
+    for name in ("bl", "ncf", "salo"):
+        run = run_sequence(seq, variant(name).replace(kitti_vertical_correction_deg=0.205))
+        gt_steps = se3.inverse(seq.poses[:-1]) @ seq.poses[1:]
+        est_steps = se3.inverse(run.poses[:-1]) @ run.poses[1:]
+        err = se3.inverse(gt_steps) @ est_steps
+        t_cm = np.mean([np.linalg.norm(e[:3, 3]) * 100 for e in err])
+        r_deg = np.mean([np.degrees(se3.rotation_angle(e)) for e in err])
+        assert t_cm < bound_cm and r_deg < 0.15, (seq_id, name, t_cm, r_deg)
+
+
+def test_real_hdl32_pair(real_data):
+    """The reference registration is good to ~2 cm / 0.25 deg (two libraries differ by that).
+
+    Bound: 5 cm and 0.5 deg, about twice the reference's own uncertainty. For NCF and
+    SALO only horizontally: the HDL-32E's rings are 1.33 deg apart, so most ground
+    neighbourhoods hold one ring and the sensor-aware NCF rejects them (as on salo32,
+    see the scan-pair test), which leaves the height weakly observed.
+    """
+    seq = open_sequence(real_data / "hdl32-pair", sensor="hdl32e")
+    for name in ("bl", "ncf", "salo"):
+        run = run_sequence(seq, variant(name))
+        err = se3.inverse(seq.poses[1]) @ run.poses[1]
+        t_err = np.linalg.norm(err[:3, 3]) if name == "bl" else np.hypot(err[0, 3], err[1, 3])
+        assert t_err < 0.05 and np.degrees(se3.rotation_angle(err)) < 0.5, (name, err[:3, 3])
+        assert run.diagnostics[1].points_raw > run.diagnostics[1].points_in_range  # range-0 points dropped
