@@ -161,7 +161,8 @@ def _add_odometry(sub) -> None:
         "KITTI sequence or a folder of .bin/.ply scans. Writes KITTI poses (lidar frame, first = identity), "
         "optionally TUM, and a per-frame diagnostics CSV.",
     )
-    p.add_argument("sequence", type=Path, help="sequence folder")
+    p.add_argument("sequence", type=Path, help="sequence folder, or a ROS 2 bag (folder, .mcap or .db3)")
+    p.add_argument("--topic", help="PointCloud2 topic of a bag with several (default: the only one, or /points)")
     p.add_argument("--variant", default="salo", choices=["bl", "ncf", "salo"], help="method (default salo)")
     p.add_argument("--sensor", help="preset or YAML (default: the folder's sensor.yaml)")
     p.add_argument("--config", type=Path, help="YAML with odometry parameters overriding the variant's")
@@ -223,7 +224,7 @@ def cmd_odometry(args) -> int:
             config = config_from_dict(changes, base=config, origin="--set")
     except ConfigError as exc:
         raise CommandError(str(exc)) from None
-    seq = open_sequence(args.sequence, sensor=args.sensor, poses=args.poses)
+    seq = open_sequence(args.sequence, sensor=args.sensor, poses=args.poses, topic=args.topic)
     frames = parse_frames(args.frames)
     n = len(range(*(frames or slice(None)).indices(len(seq))))
     out = args.out or Path("out") / args.sequence.resolve().name / config.name / "poses.txt"
@@ -294,10 +295,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in (_add_simulate, _add_odometry, _add_sensors, _add_demo):
         add(sub)
-    from tools import cli_evaluate, cli_scenes
+    from tools import cli_evaluate, cli_export, cli_scenes
 
     cli_evaluate.add_commands(sub)
     cli_scenes.add_commands(sub)
+    cli_export.add_commands(sub)
     return parser
 
 
