@@ -15,7 +15,7 @@ with relative = 20 % and the floors of ``DEFAULT_FLOORS``. Why this tolerance:
   vector widths, summation order). Emulated by scaling every point by
   1 +- 1e-12: the suite's figures moved by at most 0.5 %. So 20 % is forty
   times that margin, while a real degradation is far larger (dropping the GCR
-  in the forest, salo -> ncf, doubles the KITTI error: +116 %).
+  in the forest, salo -> ncf, doubles the KITTI error: +106 % at this writing).
 - The floors (a few per cent of the suite's typical figures) only matter
   when a figure is near zero, where a relative bound alone would be too tight.
 - Degenerate sequences are left out on purpose: in the default tunnel the
