@@ -15,10 +15,44 @@ import numpy as np
 from simlidar import se3
 
 
-def _motion_at(times_s: np.ndarray, motion_per_frame: np.ndarray, frame_period_s: float):
-    """(U,) distinct times and (N,) inverse, (U, 4, 4) sensor pose at each time in the sweep-start frame."""
-    t_unique, inverse = np.unique(np.asarray(times_s, dtype=np.float64), return_inverse=True)
-    return se3.exp(np.outer(t_unique / frame_period_s, se3.log(motion_per_frame))), inverse
+def screw_apply(xi: np.ndarray, s: np.ndarray, points: np.ndarray, rotate_only: bool = False) -> np.ndarray:
+    """Apply ``exp(s_i xi)`` to each point p_i, without forming a matrix per point.
+
+    xi: (6,) twist (rho, omega) of ``simlidar.se3``; s: (N,) fractions; points: (N, 3).
+    With k = omega / |omega| and phi_i = s_i |omega|, Rodrigues' formula gives the
+    rotation and the SE(3) left Jacobian the translation, both as scalar functions of
+    phi_i times a few fixed vectors (exact, not a small-angle approximation).
+    rotate_only: apply the rotation alone (for normals).
+    """
+    rho, omega = xi[:3], xi[3:]
+    theta = float(np.linalg.norm(omega))
+    s = np.asarray(s, dtype=np.float64)
+    if theta < 1e-12:
+        return points.copy() if rotate_only else points + np.outer(s, rho)
+    k = omega / theta
+    phi = s * theta
+    c, sn = np.cos(phi), np.sin(phi)
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    # Rodrigues, per component (skinny matmuls are slow in numpy):
+    # R p = c p + sn (k x p) + (1 - c)(k . p) k
+    kx, ky, kz = k
+    w = (kx * x + ky * y + kz * z) * (1.0 - c)
+    out = np.empty_like(points)
+    out[:, 0] = c * x + sn * (ky * z - kz * y) + w * kx
+    out[:, 1] = c * y + sn * (kz * x - kx * z) + w * ky
+    out[:, 2] = c * z + sn * (kx * y - ky * x) + w * kz
+    if rotate_only:
+        return out
+    # t(s) = V(s omega) s rho = s rho + s (1 - cos phi)/phi (k x rho) + s (phi - sin phi)/phi k x (k x rho)
+    small = phi < 1e-6
+    phi_safe = np.where(small, 1.0, phi)
+    a = s * np.where(small, phi / 2.0, (1.0 - c) / phi_safe)
+    b = s * np.where(small, phi**2 / 6.0, (phi - sn) / phi_safe)
+    k_rho = np.cross(k, rho)
+    kk_rho = np.cross(k, k_rho)
+    for i in range(3):
+        out[:, i] += s * rho[i] + a * k_rho[i] + b * kk_rho[i]
+    return out
 
 
 def deskew(points: np.ndarray, times_s: np.ndarray, motion_per_frame: np.ndarray, frame_period_s: float) -> np.ndarray:
@@ -31,10 +65,7 @@ def deskew(points: np.ndarray, times_s: np.ndarray, motion_per_frame: np.ndarray
     frame_period_s: time between sweep starts, s.
     Returns (N, 3) de-skewed points.
     """
-    # Points fire in a few thousand distinct instants: one transform per instant.
-    T, inverse = _motion_at(times_s, motion_per_frame, frame_period_s)
-    R, t = T[inverse, :3, :3], T[inverse, :3, 3]
-    return np.einsum("nij,nj->ni", R, points) + t
+    return screw_apply(se3.log(motion_per_frame), np.asarray(times_s) / frame_period_s, points)
 
 
 def redeskew(points: np.ndarray, normals: np.ndarray, times_s: np.ndarray, old_motion: np.ndarray,
@@ -45,8 +76,8 @@ def redeskew(points: np.ndarray, normals: np.ndarray, times_s: np.ndarray, old_m
     Returns the (M, 3) points and normals as ``new_motion`` would have de-skewed them:
     ``T_new(t) T_old(t)^-1`` applied per point.
     """
-    T_old, inverse = _motion_at(times_s, old_motion, frame_period_s)
-    T_new, _ = _motion_at(times_s, new_motion, frame_period_s)
-    C = (T_new @ se3.inverse(T_old))[inverse]
-    p = np.einsum("nij,nj->ni", C[:, :3, :3], points) + C[:, :3, 3]
-    return p, np.einsum("nij,nj->ni", C[:, :3, :3], normals)
+    s = np.asarray(times_s) / frame_period_s
+    xi_old, xi_new = se3.log(old_motion), se3.log(new_motion)
+    p = screw_apply(xi_new, s, screw_apply(-xi_old, s, points))  # exp(-s xi) undoes exp(s xi)
+    n = screw_apply(xi_new[:], s, screw_apply(-xi_old, s, normals, rotate_only=True), rotate_only=True)
+    return p, n

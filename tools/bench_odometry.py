@@ -1,0 +1,115 @@
+"""Benchmark of the odometry: frames/s, time per stage and peak memory of each variant.
+
+    python -m tools.bench_odometry                  # 150 frames of the city, salo32
+    python -m tools.bench_odometry --frames 300 --scene highway
+
+Simulates the sequence once (cached under out/bench/), then runs BL, NCF and SALO
+over the same frames in this process, and KISS-ICP (``pip install kiss-icp``) when
+installed, with the speed ratio against it. Prints figures; asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+from odometry.config import variant
+from odometry.metrics import evaluate_trajectory
+from odometry.pipeline import Odometry
+from simlidar.dataset import open_sequence
+
+STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject", "estimate")
+
+
+def sequence(scene: str, frames: int, sensor: str, out: Path):
+    from simlidar.sensor import load_sensor
+    from simlidar.simulate import simulate_sequence
+    from tools.cli_scenes import build_world_and_trajectory
+
+    folder = out / f"{scene}-{sensor}-{frames}"
+    if not (folder / "manifest.json").exists():
+        world, traj, info = build_world_and_trajectory(scene, 0, {})
+        t = time.perf_counter()
+        simulate_sequence(world, traj, load_sensor(sensor), folder, frames=frames, seed=0, t_start=5.0,
+                          info=info, force=True)
+        print(f"simulated {frames} frames of {scene} in {time.perf_counter() - t:.1f} s -> {folder}")
+    return open_sequence(folder)
+
+
+def peak_memory_mb(seq, name: str, frames: int) -> float:
+    """Peak traced allocation (numpy included) while registering ``frames`` frames."""
+    frames_data = [seq[k] for k in range(frames)]
+    odo = Odometry(variant(name), seq.sensor)
+    tracemalloc.start()
+    for k, f in enumerate(frames_data):
+        odo.register_frame(f, stamp_s=float(seq.times[k]))
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 1e6
+
+
+def kiss_icp_run(seq) -> tuple[float, np.ndarray] | None:
+    try:
+        from kiss_icp.config import KISSConfig
+        from kiss_icp.kiss_icp import KissICP
+    except ImportError:
+        return None
+    cfg = KISSConfig()
+    cfg.data.max_range = 100.0
+    cfg.mapping.voxel_size = cfg.data.max_range / 100.0  # what its pipeline derives when unset
+    cfg.data.deskew = True
+    odo = KissICP(cfg)
+    frames = [seq[k] for k in range(len(seq))]
+    t = time.perf_counter()
+    poses = []
+    for f in frames:
+        stamps = f.time_s / seq.sensor.sweep_period_s  # normalised to [0, 1) like a driver's
+        odo.register_frame(f.points, stamps)
+        poses.append(odo.last_pose.copy())
+    return time.perf_counter() - t, np.stack(poses)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scene", default="city")
+    ap.add_argument("--sensor", default="salo32")
+    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--memory-frames", type=int, default=20)
+    ap.add_argument("--out", type=Path, default=Path("out/bench"))
+    args = ap.parse_args()
+    seq = sequence(args.scene, args.frames, args.sensor, args.out)
+    frames = [seq[k] for k in range(len(seq))]  # read once: time the odometry, not the disk
+    print(f"{len(seq)} frames, {np.mean([len(f.points) for f in frames]):.0f} points per scan\n")
+    header = f"{'variant':8s} {'frames/s':>8s} {'ms/frame':>8s} " + " ".join(f"{s:>9s}" for s in STAGES)
+    print(header + f" {'peak MB':>8s} {'t_err %':>8s}")
+    times = {}
+    for name in ("bl", "ncf", "salo"):
+        odo = Odometry(variant(name), seq.sensor)
+        t = time.perf_counter()
+        for k, f in enumerate(frames):
+            odo.register_frame(f, stamp_s=float(seq.times[k]))
+        dt = time.perf_counter() - t
+        times[name] = dt
+        per_stage = {s: 1000 * np.mean([d.seconds.get(s, 0.0) for d in odo.diagnostics[1:]]) for s in STAGES}
+        m = evaluate_trajectory(seq.poses, np.stack(odo.poses))
+        mem = peak_memory_mb(seq, name, args.memory_frames)
+        print(f"{name:8s} {len(frames) / dt:8.1f} {1000 * dt / len(frames):8.1f} "
+              + " ".join(f"{per_stage[s]:9.1f}" for s in STAGES) + f" {mem:8.0f} {m.t_err_pct:8.3f}")
+    print("\n(stage columns: ms per frame; de-skew includes the refinements; peak MB is the traced "
+          f"allocation peak over {args.memory_frames} frames)")
+    kiss = kiss_icp_run(seq)
+    if kiss is None:
+        print("KISS-ICP: not installed (pip install kiss-icp) - no peer timing")
+    else:
+        dt, poses = kiss
+        m = evaluate_trajectory(seq.poses, np.linalg.inv(poses[0]) @ poses)
+        print(f"KISS-ICP {len(frames) / dt:8.1f} frames/s, t_err {m.t_err_pct:.3f} %; "
+              f"salo time / KISS-ICP time = {times['salo'] / dt:.2f}")
+
+
+if __name__ == "__main__":
+    main()
