@@ -160,7 +160,7 @@ def _finish(record, out: Path) -> None:
 def cmd_table(args) -> int:
     from tools.experiments.records import RunRecord
     from tools.experiments.suite import table_suite
-    from tools.experiments.table import TableParams, run_table, table_rows, write_table
+    from tools.experiments.table import TableParams, run_table, salo_vs_bl, table_rows, write_table
 
     default = table_suite()
     if args.quick and not args.sequences:
@@ -183,6 +183,10 @@ def cmd_table(args) -> int:
         raise _error(str(exc)) from None
     write_table(result, record)
     print((args.out / "table.md").read_text(), end="")
+    for v in salo_vs_bl(result):
+        if v["salo_better"] is not None:
+            verdict = "SALO lower" if v["salo_better"] else "SALO NOT lower"
+            print(f"{v['sequence']}: BL {v['bl_mu']:.3f}, SALO {v['salo_mu']:.3f} m/100 m: {verdict}")
     for row in table_rows(result):
         if row["method"] == "KISS-ICP" and not row["available"] and row.get("note"):
             print(f"KISS-ICP: {row['note']}")

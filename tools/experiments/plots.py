@@ -55,7 +55,22 @@ def _figure(**kwargs):
 
 
 # ---------------------------------------------------------------- trajectories (Fig. 4)
-def _draw_tracks(ax, gt: np.ndarray, est: dict, errs: dict | None, segment_length_m: float) -> None:
+def _view(gt: np.ndarray, square: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(2,) lower and upper x, y limits around the ground truth's track, m (a square, or its own shape)."""
+    lo, hi = gt[:, :2, 3].min(axis=0), gt[:, :2, 3].max(axis=0)
+    span = float(np.max(hi - lo))
+    margin = max(20.0, 0.15 * span)
+    lo, hi = lo - margin, hi + margin
+    if square:
+        centre, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2
+        return centre - half, centre + half
+    # Not thinner than a third of the longer side: a straight road still shows its lateral error.
+    centre, half = (lo + hi) / 2, np.maximum((hi - lo) / 2, float(np.max(hi - lo)) / 6)
+    return centre - half, centre + half
+
+
+def _draw_tracks(ax, gt: np.ndarray, est: dict, errs: dict | None, segment_length_m: float,
+                 square: bool = True) -> None:
     ax.plot(gt[:, 0, 3], gt[:, 1, 3], color=METHOD_COLORS["ground truth"], lw=2.2, ls="--", label="ground truth",
             zorder=5)
     for name, poses in est.items():
@@ -67,14 +82,11 @@ def _draw_tracks(ax, gt: np.ndarray, est: dict, errs: dict | None, segment_lengt
         ax.plot(poses[:, 0, 3], poses[:, 1, 3], color=METHOD_COLORS.get(name), ls=ls, lw=lw, label=label)
     ax.plot(gt[0, 0, 3], gt[0, 1, 3], "ks", ms=7, mfc="none", mew=1.5, label="start")
     # The view follows the ground truth (with a margin): a diverged estimate must not shrink it to a dot.
-    lo, hi = gt[:, :2, 3].min(axis=0), gt[:, :2, 3].max(axis=0)
-    margin = max(20.0, 0.3 * float(np.max(hi - lo)))
-    lo, hi = lo - margin, hi + margin
+    lo, hi = _view(gt, square)
     outside = [name for name, poses in est.items()
                if np.any(poses[:, :2, 3] < lo) or np.any(poses[:, :2, 3] > hi)]
-    centre, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal", adjustable="box")
     if outside:
         ax.text(0.99, 0.01, "leaves the view: " + ", ".join(outside), transform=ax.transAxes, ha="right",
@@ -87,9 +99,12 @@ def _draw_tracks(ax, gt: np.ndarray, est: dict, errs: dict | None, segment_lengt
 def trajectory_plot(path, gt: np.ndarray, est: dict, errs: dict | None = None, title: str = "",
                     segment_length_m: float = 100.0) -> Path:
     """Top view of ground truth (N, 4, 4) and each method's poses (name -> (N, 4, 4)), in metres."""
-    fig = _figure(figsize=(8.5, 8.6))
+    lo, hi = _view(gt, square=False)
+    ratio = float((hi[1] - lo[1]) / (hi[0] - lo[0]))
+    width = 9.0 if ratio <= 1 else max(5.0, 8.0 / ratio)
+    fig = _figure(figsize=(width, min(9.0, max(3.0, width * ratio)) + 1.6))
     ax = fig.subplots()
-    _draw_tracks(ax, gt, est, errs, segment_length_m)
+    _draw_tracks(ax, gt, est, errs, segment_length_m, square=False)
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
     _end_inset(ax, gt, est)
@@ -104,9 +119,9 @@ def _end_inset(ax, gt: np.ndarray, est: dict) -> None:
 
     end = gt[-1, :2, 3]
     errs = [float(np.linalg.norm(p[-1, :2, 3] - end)) for p in est.values()]
-    half = min(max(1.0, 1.5 * max(errs, default=0.0)), 25.0)
+    half = max(1.0, 1.5 * max(errs, default=0.0))
     extent = float(np.max(np.ptp(gt[:, :2, 3], axis=0)))
-    if extent < 8 * half:  # the whole path is about as small as the zoom: nothing to add
+    if extent < 8 * half:  # the ends are as far apart as the path is long: the full view shows it all
         return
     # The corner of the axes the ground truth crosses least (axes coordinates of its points).
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
