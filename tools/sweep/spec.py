@@ -294,6 +294,12 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
             if isinstance(n, bool) or not isinstance(n, int | float) or not math.isfinite(n) or n < 0:
                 raise fail("noise_std_m", f"every level must be a number >= 0 (metres), got {n!r}")
         noise = tuple(float(n) for n in noise)
+        for s in sensors:
+            for n in noise:
+                try:
+                    load_sensor(s).with_overrides(range_noise_std_m=n)
+                except SensorError as exc:
+                    raise fail("noise_std_m", f"{n:g} for sensor {s}: {exc}") from None
 
     frames = get("frames", DEFAULT_FRAMES)
     if isinstance(frames, bool) or not isinstance(frames, int) or frames < 2:
