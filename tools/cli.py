@@ -295,11 +295,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in (_add_simulate, _add_odometry, _add_sensors, _add_demo):
         add(sub)
-    from tools import cli_evaluate, cli_export, cli_scenes
+    from tools import cli_evaluate, cli_experiment, cli_export, cli_scenes, cli_sweep
 
-    cli_evaluate.add_commands(sub)
-    cli_scenes.add_commands(sub)
-    cli_export.add_commands(sub)
+    for module in (cli_evaluate, cli_scenes, cli_experiment, cli_sweep, cli_export):
+        module.add_commands(sub)
     return parser
 
 
