@@ -100,7 +100,7 @@ class NormalSamples:
 
     error_deg: (M,) angle between estimated and true normal. single_surface: (M,) bool.
     curvature: (M,) PCL curvature. per model: max_std_deg (M,), rms_std_deg (M,)
-    predicted RMS tilt, mahalanobis2 (M,) squared Mahalanobis tilt error.
+    predicted RMS tilt, mahalanobis2 (M,) squared Mahalanobis tilt error (nan without a finite prediction).
     """
 
     error_deg: np.ndarray
@@ -156,7 +156,9 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
         a = np.einsum("mj,mj->m", e, nc.eigenvectors[:, :, 1])
         b = np.einsum("mj,mj->m", e, nc.eigenvectors[:, :, 2])
         with np.errstate(divide="ignore", invalid="ignore"):
-            maha[model] = a * a / lam[:, 1] + b * b / lam[:, 2]
+            d2 = a * a / lam[:, 1] + b * b / lam[:, 2]
+        # No finite prediction (degenerate neighbourhood): no Mahalanobis error (nan), not a perfect one (0).
+        maha[model] = np.where(np.isfinite(lam[:, 2]), d2, np.nan)
         max_std[model] = np.degrees(np.sqrt(lam[:, 2]))
         rms_std[model] = np.degrees(np.sqrt(lam[:, 1] + lam[:, 2]))
     return NormalSamples(np.degrees(err), single, est.curvature, max_std, rms_std, maha)
@@ -199,8 +201,8 @@ def _calibration_row(s, model, m, noise_m, subset, lo, hi) -> dict:
         "predicted_rms_deg": _rms(rms_pred[finite]) if finite.any() else float("nan"),
         "actual_rms_deg": _rms(err), "actual_median_deg": float(np.median(err)) if len(err) else float("nan"),
         "mahalanobis2_mean": float(np.mean(d2[np.isfinite(d2)])) if np.isfinite(d2).any() else float("nan"),
-        "mahalanobis2_median": float(np.median(d2[np.isfinite(d2)])) if np.isfinite(d2).any() else float("nan"),
-        "within_95": float(np.mean(d2[np.isfinite(d2)] < CHI2_2DOF_95)) if np.isfinite(d2).any() else float("nan"),
+        "mahalanobis2_median": float(np.median(d2[~np.isnan(d2)])) if (~np.isnan(d2)).any() else float("nan"),
+        "within_95": float(np.mean(d2[~np.isnan(d2)] < CHI2_2DOF_95)) if (~np.isnan(d2)).any() else float("nan"),
     }
 
 
@@ -264,10 +266,10 @@ def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path, progress: bool 
                 if s.single_surface.any() else float("nan"),
                 "predicted_max_std_median_deg": float(np.median(s.max_std_deg[model][finite]))
                 if finite.any() else float("nan"),
-                "single_surface_mahalanobis2_median": float(np.median(d2[s.single_surface & np.isfinite(d2)]))
-                if (s.single_surface & np.isfinite(d2)).any() else float("nan"),
-                "single_surface_within_95": float(np.mean(d2[s.single_surface & np.isfinite(d2)] < CHI2_2DOF_95))
-                if (s.single_surface & np.isfinite(d2)).any() else float("nan"),
+                "single_surface_mahalanobis2_median": float(np.median(d2[s.single_surface & ~np.isnan(d2)]))
+                if (s.single_surface & ~np.isnan(d2)).any() else float("nan"),
+                "single_surface_within_95": float(np.mean(d2[s.single_surface & ~np.isnan(d2)] < CHI2_2DOF_95))
+                if (s.single_surface & ~np.isnan(d2)).any() else float("nan"),
             })
     return NcfStudyResult(calib, ctau, overview)
 

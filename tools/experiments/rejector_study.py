@@ -444,13 +444,40 @@ def write_rejector_study(result: RejectorStudyResult, record: RunRecord) -> None
     }
     for name, draw in figs.items():
         draw(record.path(name))
-    record.path("summary.md").write_text(rejector_markdown(result, record.params))
+    record.path("summary.md").write_text(rejector_markdown(record.params, result.error_summary, result.pr_summary,
+                                                           result.finding, len(result.pairs)))
 
 
-def rejector_markdown(result: RejectorStudyResult, params: dict) -> str:
-    """The study's human-readable page: tables, the target finding, the figures."""
+def verdict_lines(error_summary: list[dict], finding: dict) -> tuple[list[str], list[str]]:
+    """Bullets stating what the figures say: (GCR's recall per target, GCR against distance per level)."""
+    out, levels = [], []
+    if {"filtered", "raw"} <= set(finding):
+        f, r = finding["filtered"], finding["raw"]
+        if f["gcr_recall"] is not None and r["gcr_recall"] is not None:
+            better = "raw" if r["gcr_recall"] > f["gcr_recall"] else "filtered"
+            out.append(f"At the true pose GCR keeps {100 * r['gcr_recall']:.1f} % of the true correspondences "
+                       f"against the raw target and {100 * f['gcr_recall']:.1f} % against the filtered one "
+                       f"(precision {r['gcr_precision']:.3f} / {f['gcr_precision']:.3f}; the distance rejector's "
+                       f"{r['distance_precision']:.3f} / {f['distance_precision']:.3f}): GCR keeps more true "
+                       f"matches against the {better} target.")
+    for row in error_summary:
+        if row["rejector"] != "gcr":
+            continue
+        dist = next((d for d in error_summary if d["rejector"] == "distance" and d["level"] == row["level"]
+                     and d["target"] == row["target"]), None)
+        if dist is not None and row["recovered_5cm"] < dist["recovered_5cm"]:
+            levels.append(f"At {row['level']} ({row['target']} target) ICP with GCR ends within 5 cm of the truth in "
+                       f"{100 * row['recovered_5cm']:.0f} % of the pairs, with the distance rejector in "
+                       f"{100 * dist['recovered_5cm']:.0f} %: here GCR does worse than the baseline.")
+    return ([f"- {t}" for t in out] + ([""] if out else []),
+            [f"- {t}" for t in levels] + ([""] if levels else []))
+
+
+def rejector_markdown(params: dict, error_summary: list[dict], pr_summary: list[dict], finding: dict,
+                      pairs: int) -> str:
+    """The study's human-readable page (tables, the target finding, the figures), from what results.json holds."""
     lines = ["# Rejector study: GCR against the distance rejector (SALO Sec. IV-A, Fig. 3)", ""]
-    lines.append(f"{len(result.pairs)} scan pairs from {', '.join(s['name'] for s in params['sequences'])}; "
+    lines.append(f"{pairs} scan pairs from {', '.join(s['name'] for s in params['sequences'])}; "
                  f"initial guess = true pose composed with a random rotation (uniform in [-l_r, l_r] about a random "
                  "axis) and translation (uniform in [-l_t, l_t] along a random axis); seed "
                  f"{params['seed']}. Scans de-skewed with the true motion, filtered as the `salo` config "
@@ -466,8 +493,9 @@ def rejector_markdown(result: RejectorStudyResult, params: dict) -> str:
               "median iterations"]
     rows = [[r["level"], r["target"], r["rejector"], r["count"], fmt(r["t_err_median_m"], ".4f"),
              fmt(r["t_err_mean_m"], ".4f"), fmt(r["t_err_p90_m"], ".4f"), fmt(r["t_err_max_m"], ".3f"),
-             f"{100 * r['recovered_5cm']:.0f} %", fmt(r["iterations_median"], ".0f")] for r in result.error_summary]
+             f"{100 * r['recovered_5cm']:.0f} %", fmt(r["iterations_median"], ".0f")] for r in error_summary]
     lines.append(markdown_table(header, rows, "lllrrrrrrr"))
+    lines += verdict_lines(error_summary, finding)[1]
     lines += ["![translation error per level](translation_error_boxplot.png)", ""]
     lines += ["## Precision and recall against the true correspondences", ""]
     lines.append("Over the nearest-neighbour candidates (no search bound), pooled over pairs. At the *true pose* "
@@ -476,14 +504,18 @@ def rejector_markdown(result: RejectorStudyResult, params: dict) -> str:
     lines.append("")
     header = ["stage", "level", "target", "rejector", "true share", "kept share", "precision", "recall"]
     order = {"true pose": 0, "initial guess": 1, "final estimate": 2}
+    level_order = {"true pose": -1, **{level_label((lv["l_r_deg"], lv["l_t_m"])): i
+                                       for i, lv in enumerate(params["levels"])}}
     rows = [[r["stage"], r["level"], r["target"], r["rejector"], fmt(r["true_fraction"], ".3f"),
              fmt(r["kept_fraction"], ".3f"), fmt(r["precision"], ".3f"), fmt(r["recall"], ".3f")]
-            for r in sorted(result.pr_summary, key=lambda r: (order[r["stage"]], r["level"], r["target"]))
+            for r in sorted(pr_summary, key=lambda r: (order[r["stage"]], level_order.get(r["level"], 99),
+                                                        r["target"]))
             if r["rejector"] in ("distance", "gcr", "bl_chain", "salo_chain")]
     lines.append(markdown_table(header, rows, "llllrrrr"))
     lines += ["![precision and recall](precision_recall.png)", ""]
     lines += ["## Which target GCR needs", ""]
-    for kind, f in result.finding.items():
+    lines += verdict_lines(error_summary, finding)[0]
+    for kind, f in finding.items():
         lines.append(f"- **{kind}** target, at the true pose: GCR precision {fmt(f['gcr_precision'], '.3f')}, "
                      f"recall {fmt(f['gcr_recall'], '.3f')} (distance rejector: precision "
                      f"{fmt(f['distance_precision'], '.3f')}, recall {fmt(f['distance_recall'], '.3f')}); "
@@ -494,7 +526,7 @@ def rejector_markdown(result: RejectorStudyResult, params: dict) -> str:
     header = ["target", "incidence, deg", "true matches (sample)", "match distance median, m",
               "GCR threshold median, m", "GCR recall"]
     rows = []
-    for kind, f in result.finding.items():
+    for kind, f in finding.items():
         for b in f["by_incidence"]:
             rows.append([kind, f"{b['incidence_lo_deg']:g}-{min(b['incidence_hi_deg'], 90):g}",
                          b["true_matches_sampled"], fmt(b["distance_median_m"], ".3f"),
