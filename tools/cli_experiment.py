@@ -13,6 +13,8 @@ from pathlib import Path
 
 DEFAULT_ROOT = Path("out/experiments")
 DEFAULT_CACHE = DEFAULT_ROOT / "sequences"
+TABLE_QUICK_FRAMES = 25
+REJECTORS_QUICK_FRAMES = 5
 
 
 def add_commands(subparsers) -> None:
@@ -51,9 +53,9 @@ def _common(p, name: str) -> None:
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
 
 
-def _sequence_args(p, default_text: str) -> None:
+def _sequence_args(p, default_text: str, quick_frames: int) -> None:
     p.add_argument("--sequences", help=f"comma-separated SCENE[:SEED[:FRAMES]] (default {default_text})")
-    p.add_argument("--frames", type=int, help="frames per sequence (default 300; --quick 25)")
+    p.add_argument("--frames", type=int, help=f"frames per sequence (default 300; --quick {quick_frames})")
     p.add_argument("--sensor", default="salo32", help="sensor preset or YAML (default salo32)")
     p.add_argument("--noise-std", type=float, default=0.02, help="range noise, 1 sigma, m (default 0.02)")
     p.add_argument("--start", type=float, help="time along each path of the first sweep, s (default 0; --quick 10)")
@@ -69,7 +71,7 @@ def _add_table(sub) -> None:
         "degeneracy summary and top-down trajectory plots (Fig. 4).",
     )
     _common(p, "table")
-    _sequence_args(p, "city:1,city:2,city:3,tunnel:1,highway:1,open:1")
+    _sequence_args(p, "city:1,city:2,city:3,tunnel:1,highway:1,open:1", TABLE_QUICK_FRAMES)
     p.add_argument("--methods", default="bl,ncf,salo,kiss-icp", help="comma-separated (default all four)")
     p.add_argument("--segment-length", type=float, help="segment length, m (default 100; --quick 10)")
     p.add_argument("--step-frames", type=int, help="frames between segment starts (default 10; --quick 5)")
@@ -86,7 +88,7 @@ def _add_rejectors(sub) -> None:
         "per level, and each rejector's precision and recall against the true correspondences.",
     )
     _common(p, "rejectors")
-    _sequence_args(p, "city:1,city:2,city:3 (the table's)")
+    _sequence_args(p, "city:1,city:2,city:3 (the table's)", REJECTORS_QUICK_FRAMES)
     p.add_argument("--pairs", type=int, help="scan pairs (default 100, the paper's; --quick 4)")
     p.add_argument("--levels", help="comma-separated L_R_DEG:L_T_M (default 0:0,1:0.1,3:0.3,5:0.5,10:1)")
     p.add_argument("--targets", default="filtered,raw", help="match targets (default filtered,raw)")
@@ -165,7 +167,7 @@ def cmd_table(args) -> int:
     default = table_suite()
     if args.quick and not args.sequences:
         default = [s for s in default if s.label is None and (s.scene, s.seed) in (("city", 1), ("tunnel", 1))]
-    specs = _specs(args.sequences, default, args, quick_frames=25)
+    specs = _specs(args.sequences, default, args, quick_frames=TABLE_QUICK_FRAMES)
     try:
         params = TableParams(
             sequences=specs,
@@ -219,7 +221,7 @@ def cmd_rejectors(args) -> int:
     default = [s for s in table_suite() if s.scene == "city"]
     if args.quick and not args.sequences:
         default = default[:1]
-    specs = _specs(args.sequences, default, args, quick_frames=5)
+    specs = _specs(args.sequences, default, args, quick_frames=REJECTORS_QUICK_FRAMES)
     targets = tuple(t.strip() for t in args.targets.split(",") if t.strip())
     if not targets or any(t not in TARGETS for t in targets):
         raise _error(f"--targets {args.targets!r}: choose from {', '.join(TARGETS)}")
