@@ -91,7 +91,16 @@ class NcfStudyParams:
             "models": list(self.models),
             "seed": self.seed,
             "config_overrides": dict(self.config_overrides),
+            "max_curvature": self.config().max_curvature,
+            "voxel_size_m": self.config().voxel_size_m,
+            "normal_neighbours": self.config().normal_neighbours,
         }
+
+    def config(self):
+        """The ``salo`` odometry config with the overrides: voxel size, k and the curvature bound used here."""
+        from odometry.config import variant
+
+        return variant("salo").replace(**dict(self.config_overrides))
 
 
 @dataclass
@@ -206,13 +215,19 @@ def _calibration_row(s, model, m, noise_m, subset, lo, hi) -> dict:
     }
 
 
-def ctau_rows(s: NormalSamples, model: str, c_tau_deg, noise_m: float) -> list[dict]:
-    """Kept share and true error of kept / rejected points for each c_tau (NCF alone, as the filter applies it)."""
+def ctau_rows(s: NormalSamples, model: str, c_tau_deg, noise_m: float, max_curvature: float) -> list[dict]:
+    """Kept share and true error of kept / rejected points for each c_tau.
+
+    NCF alone, as the filter applies it; and NCF followed by the curvature
+    filter (``max_curvature``), as the odometry applies both.
+    """
     pred, err = s.max_std_deg[model], s.error_deg
+    with np.errstate(invalid="ignore"):
+        flat = s.curvature <= max_curvature
     rows = []
     for c in c_tau_deg:
         keep = pred < c  # the filter rejects C_22 >= c_tau; nan / inf (degenerate) are rejected
-        kept, rej = err[keep], err[~keep]
+        kept, rej, both = err[keep], err[~keep], err[keep & flat]
         rows.append({
             "model": model, "noise_std_m": noise_m, "c_tau_deg": c, "points": len(err),
             "kept_fraction": float(keep.mean()) if len(err) else float("nan"),
@@ -221,6 +236,9 @@ def ctau_rows(s: NormalSamples, model: str, c_tau_deg, noise_m: float) -> list[d
             "rejected_error_median_deg": float(np.median(rej)) if len(rej) else float("nan"),
             "rejected_error_p90_deg": float(np.percentile(rej, 90)) if len(rej) else float("nan"),
             "kept_single_surface": float(s.single_surface[keep].mean()) if keep.any() else float("nan"),
+            "with_curvature_kept_fraction": float((keep & flat).mean()) if len(err) else float("nan"),
+            "with_curvature_error_median_deg": float(np.median(both)) if len(both) else float("nan"),
+            "with_curvature_error_p90_deg": float(np.percentile(both, 90)) if len(both) else float("nan"),
         })
     return rows
 
@@ -236,10 +254,9 @@ def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path, progress: bool 
     """Simulate the scans at each noise level and measure (see the module notes); writes nothing."""
     from tqdm import tqdm
 
-    from odometry.config import variant
     from simlidar.dataset import open_sequence
 
-    config = variant("salo").replace(**dict(params.config_overrides))
+    config = params.config()
     calib, ctau, overview = [], [], []
     jobs = [(noise, spec) for noise in params.noise_levels_m for spec in params.scans]
     per_level: dict[float, list[NormalSamples]] = {}
@@ -254,7 +271,7 @@ def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path, progress: bool 
         for model in params.models:
             for subset in ("all", "single-surface"):
                 calib += calibration_rows(s, model, params.bin_edges_deg, noise, subset)
-            ctau += ctau_rows(s, model, params.c_tau_deg, noise)
+            ctau += ctau_rows(s, model, params.c_tau_deg, noise, config.max_curvature)
             d2 = s.mahalanobis2[model]
             finite = np.isfinite(s.max_std_deg[model])
             overview.append({
@@ -325,12 +342,18 @@ def ncf_markdown(result: NcfStudyResult, params: dict) -> str:
     lines.append(markdown_table(header, rows, "lrlrrrrrr"))
     lines += ["All points (edges included) are in `calibration.csv` (subset \"all\").", "",
               "![calibration](calibration.png)", "", "## The filter as c_tau varies", ""]
+    lines.append("\"+ curvature\": the points NCF keeps that the odometry's curvature filter (PCL curvature <= "
+                 f"{params['max_curvature']:g}) keeps too.")
+    lines.append("")
     header = ["model", "noise, mm", "c_tau, deg", "kept", "kept: median error, deg", "kept: p90, deg",
-              "rejected: median error, deg", "rejected: p90, deg"]
+              "rejected: median error, deg", "rejected: p90, deg", "+ curvature: kept",
+              "+ curvature: median, deg", "+ curvature: p90, deg"]
     rows = [[r["model"], f"{1000 * r['noise_std_m']:g}", f"{r['c_tau_deg']:g}", fmt(r["kept_fraction"], ".3f"),
              fmt(r["kept_error_median_deg"], ".2f"), fmt(r["kept_error_p90_deg"], ".2f"),
-             fmt(r["rejected_error_median_deg"], ".2f"), fmt(r["rejected_error_p90_deg"], ".2f")]
+             fmt(r["rejected_error_median_deg"], ".2f"), fmt(r["rejected_error_p90_deg"], ".2f"),
+             fmt(r["with_curvature_kept_fraction"], ".3f"), fmt(r["with_curvature_error_median_deg"], ".2f"),
+             fmt(r["with_curvature_error_p90_deg"], ".2f")]
             for r in result.ctau]
-    lines.append(markdown_table(header, rows, "lrrrrrrr"))
+    lines.append(markdown_table(header, rows, "lrrrrrrrrrr"))
     lines += ["![kept share and errors against c_tau](c_tau.png)", ""]
     return "\n".join(lines) + "\n"

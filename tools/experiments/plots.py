@@ -43,7 +43,7 @@ def _plain_log_ticks(ax, which: str = "both") -> None:
 
     for name in ("x", "y") if which == "both" else (which,):
         axis = getattr(ax, f"{name}axis")
-        axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 3.0, 5.0)))
         axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         axis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
 
@@ -59,7 +59,7 @@ def _view(gt: np.ndarray, square: bool) -> tuple[np.ndarray, np.ndarray]:
     """(2,) lower and upper x, y limits around the ground truth's track, m (a square, or its own shape)."""
     lo, hi = gt[:, :2, 3].min(axis=0), gt[:, :2, 3].max(axis=0)
     span = float(np.max(hi - lo))
-    margin = max(20.0, 0.15 * span)
+    margin = max(3.0, 0.15 * span)
     lo, hi = lo - margin, hi + margin
     if square:
         centre, half = (lo + hi) / 2, float(np.max(hi - lo)) / 2
