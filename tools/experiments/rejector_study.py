@@ -31,6 +31,21 @@ close as the target's sampling allows: raw returns are that dense, voxel
 centroids are about a voxel apart. GCR's recall at the true pose against each
 target, and the distances of true matches set beside the thresholds
 (``match_distances.png``), say which target GCR needs.
+
+Measured (``salo experiment rejectors``: 100 pairs of the table's three city
+sequences, salo32, 2 cm range noise, seed 0). At the true pose GCR keeps
+98.1 % of the true correspondences against the raw previous scan and 92.2 %
+against its filtered subset (45-70 deg incidence: 97.8 % against 83.5 %), at
+the distance rejector's precision (0.954 / 0.941 against 0.952 / 0.937): true
+matches lie a median 7.7 cm from the nearest raw return but 12.0 cm from the
+nearest voxel centroid, against thresholds of a median 31 cm here (the rings
+are 0.26 deg apart: 9 cm at 20 m head-on, more at oblique incidence). GCR
+therefore needs the raw scan as its target. From perturbed guesses its recall
+falls much faster than the distance rejector's (3 deg / 0.3 m: 0.45 raw,
+0.37 filtered, against 0.80 / 0.77) and ICP with GCR recovers less often
+(5 deg / 0.5 m: 80 % of the pairs within 5 cm, against 99-100 %) on either
+target: on this data GCR does not beat the distance rejector at any level,
+unlike the paper's Fig. 3.
 """
 
 from __future__ import annotations
