@@ -165,6 +165,25 @@ def test_table_files_and_values(table_run):
     assert "SALO against BL" in (out / "summary.md").read_text()
 
 
+def test_table_run_reads_back(table_run, tmp_path):
+    import shutil
+
+    from tools.experiments.table import load_table_result, rewrite_table
+
+    out, result = table_run
+    copy = tmp_path / "table"
+    shutil.copytree(out, copy)
+    back = load_table_result(copy)
+    assert [s.spec for s in back.sequences] == [s.spec for s in result.sequences]
+    for m in ("bl", "salo"):
+        got, want = back.sequences[0].methods[m], result.sequences[0].methods[m]
+        assert np.allclose(got.segment_errors_m, want.segment_errors_m)
+    before = json.loads((copy / "results.json").read_text())
+    rewrite_table(copy)
+    assert json.loads((copy / "results.json").read_text())["table"] == before["table"]
+    assert json.loads((copy / RUN_FILE).read_text())["status"] == "complete"  # run.json untouched
+
+
 def test_salo_not_worse_than_bl_beyond_noise(table_run):
     """SALO's mean error is not above BL's by more than the noise of the comparison.
 

@@ -74,7 +74,7 @@ def _run_markdown(run_dir: Path, link_base: Path) -> str:
     head, sep, rest = body.partition("\n")
     if not head.startswith("# "):
         head, rest = f"# {info.get('experiment', run_dir.name)}: {run_dir.name}", body
-    parts = [head.replace("# ", "## ", 1), "", prov, _demote(rest if sep or rest else "")]
+    parts = [head.replace("# ", "## ", 1) + f" [{run_dir.name}]", "", prov, _demote(rest if sep or rest else "")]
     others = sorted(p for p in run_dir.rglob("*.png") if p.resolve() not in shown and not p.name.startswith("."))
     if others:
         parts += ["", "### Other figures", ""]

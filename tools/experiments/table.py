@@ -313,6 +313,9 @@ def table_markdown(result: TableResult, params: dict) -> str:
                      f"translational error of every {L:g} m segment (KITTI protocol, starts every "
                      f"{result.params.step_frames}th frame) in metres per 100 m: mean mu and standard deviation "
                      "sigma per sequence, and over all segments pooled (Overall). Lowest mu per column in bold.")
+    if result.params.config_overrides:
+        changed = ", ".join(f"`{k}: {v}`" for k, v in result.params.config_overrides)
+        lines.append(f"\nOdometry parameters changed from the variants' defaults, for every method: {changed}.")
     if L != 100.0:
         lines.append(f"\n**Segments are {L:g} m here, not the paper's 100 m** (a quick run): errors are still "
                      "scaled to m per 100 m, but are not comparable with 100 m figures.")
@@ -406,3 +409,53 @@ def write_table(result: TableResult, record: RunRecord) -> None:
     plots.trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=result.params.segment_length_m)
     plots.error_bars(record.path("errors_per_sequence.png"), rows, result.params.segment_length_m)
     record.path("summary.md").write_text(table_markdown(result, record.params))
+
+
+# ---------------------------------------------------------------- a finished run, read back
+def load_table_result(run_dir: str | Path) -> TableResult:
+    """A ``TableResult`` rebuilt from a run folder's results.json and poses (no odometry is run).
+
+    For redrawing a run's pages and figures after the presentation code changed;
+    diagnostics are not stored in results.json, so they are not restored.
+    """
+    import json
+
+    from simlidar.dataset import read_kitti_poses
+
+    run = Path(run_dir)
+    res = json.loads((run / "results.json").read_text())
+    p = res["params"]
+    specs = tuple(SequenceSpec(**{**{k: v for k, v in s.items() if k != "name"},
+                                  "overrides": tuple(s["overrides"].items())}) for s in p["sequences"])
+    params = TableParams(sequences=specs, methods=tuple(p["methods"]), segment_length_m=p["segment_length_m"],
+                         step_frames=p["step_frames"], config_overrides=tuple(p["config_overrides"].items()))
+    rows = {(r["sequence"], r["method"]): r for r in res["table"]}
+    sequences = []
+    for spec in specs:
+        stored = res["sequences"][spec.name]
+        methods = {}
+        for m in params.methods:
+            row = rows[(spec.name, METHOD_LABELS[m])]
+            poses_file = run / "poses" / spec.name / f"{m}.txt"
+            r = MethodResult(m, bool(row["available"]), row.get("note") or "")
+            if r.available and poses_file.is_file():
+                r.poses = read_kitti_poses(poses_file)
+                r.segment_errors_m = np.asarray(stored["segment_errors_m_per_100m"][m], dtype=float)
+                r.metrics = stored["metrics"].get(m, {})
+                r.frames_per_second = row.get("frames_per_second") or float("nan")
+                r.flagged_degenerate, r.extrapolated = row.get("flagged_degenerate"), row.get("extrapolated")
+            else:
+                r.available = False
+            methods[m] = r
+        gt = read_kitti_poses(run / "poses" / spec.name / "gt.txt")
+        sequences.append(SequenceResult(spec, Path(stored["folder"]), gt, stored["degeneracy"], methods))
+    return TableResult(params, sequences)
+
+
+def rewrite_table(run_dir: str | Path) -> None:
+    """Redraw a finished table run's tables, page and figures from what it stored (run.json kept)."""
+    from .records import read_run
+
+    result = load_table_result(run_dir)
+    record = RunRecord(run_dir, "table", read_run(run_dir)["params"])
+    write_table(result, record)
