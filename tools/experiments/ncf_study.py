@@ -92,6 +92,7 @@ class NcfStudyParams:
             "seed": self.seed,
             "config_overrides": dict(self.config_overrides),
             "max_curvature": self.config().max_curvature,
+            "ncf_max_normal_std_deg": self.config().ncf_max_normal_std_deg,
             "voxel_size_m": self.config().voxel_size_m,
             "normal_neighbours": self.config().normal_neighbours,
         }
@@ -302,7 +303,7 @@ def write_ncf_study(result: NcfStudyResult, record: RunRecord) -> None:
                                              "overview": result.overview, "calibration": result.calibration,
                                              "c_tau": result.ctau})
     plots.ncf_calibration(record.path("calibration.png"), result.calibration)
-    plots.ncf_ctau(record.path("c_tau.png"), result.ctau)
+    plots.ncf_ctau(record.path("c_tau.png"), result.ctau, default_c_tau_deg=record.params.get("ncf_max_normal_std_deg"))
     record.path("summary.md").write_text(ncf_markdown(result, record.params))
 
 

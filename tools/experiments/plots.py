@@ -407,8 +407,11 @@ def ncf_calibration(path, calibration: list[dict], min_count: int = 20) -> Path:
     return _save(fig, path)
 
 
-def ncf_ctau(path, ctau: list[dict]) -> Path:
-    """Kept share and true normal error of kept / rejected points against c_tau, per noise level."""
+def ncf_ctau(path, ctau: list[dict], default_c_tau_deg: float | None = None) -> Path:
+    """Kept share and true normal error of kept / rejected points against c_tau, per noise level.
+
+    ``default_c_tau_deg``: the odometry's configured c_tau, marked by a dotted line.
+    """
     noises = sorted({r["noise_std_m"] for r in ctau})
     models = list(dict.fromkeys(r["model"] for r in ctau))
     colors = {"range": "tab:green", "isotropic": "tab:blue"}
@@ -431,14 +434,16 @@ def ncf_ctau(path, ctau: list[dict]) -> Path:
         _plain_log_ticks(axes[1, j])
         for ax in axes[:, j]:
             ax.grid(True, which="both", alpha=0.25)
-        axes[0, j].axvline(3.0, color="0.5", lw=1, ls=":")
-        axes[1, j].axvline(3.0, color="0.5", lw=1, ls=":")
+        if default_c_tau_deg:
+            for ax in axes[:, j]:
+                ax.axvline(default_c_tau_deg, color="0.5", lw=1, ls=":")
     axes[0, 0].set_ylabel("share of points kept (0-1)")
     axes[0, 0].set_ylim(0, 1.02)
     axes[1, 0].set_ylabel("median angle to the true normal, deg")
     axes[0, 0].legend(fontsize=9, title="noise model")
     axes[1, 0].legend(fontsize=8)
-    fig.suptitle("NCF as c_tau varies (dotted: the default 3 deg)")
+    fig.suptitle("NCF as c_tau varies" + (f" (dotted: the configured {default_c_tau_deg:g} deg)"
+                                          if default_c_tau_deg else ""))
     return _save(fig, path)
 
 
