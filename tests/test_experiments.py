@@ -193,13 +193,13 @@ def test_salo_not_worse_than_bl_beyond_noise(table_run):
     drive both methods share the same cold-start error of the first frame, so
     the comparison is of the steady state.
 
-    What this does not claim: that SALO wins. On the full suite (``salo
-    experiment table``, 300 frames, 100 m segments) SALO's mean was above
-    BL's on city-1 (0.32 against 0.25 m per 100 m) and city-2 (0.73 against
-    0.45), below on city-3, the highway and open ground. NCF keeps about half
-    of the points and the frame-to-frame error doubles in the city (RPE 7 mm
-    against 4 mm), which can outweigh its better normals there. This test is a
-    guard against SALO becoming clearly worse than BL on an easy drive.
+    What this does not claim: that SALO always wins. On the full suite
+    (``salo experiment table`` at commit ac65a1b: 300 frames, 100 m segments)
+    SALO's mean was below BL's on five sequences but above it on city-3 (0.46
+    against 0.21 m per 100 m); in the city NCF and SALO keep fewer points and
+    their frame-to-frame error is higher than BL's (RPE 5-7 mm against 3-4 mm),
+    which can outweigh the better normals. This test is a guard against SALO
+    becoming clearly worse than BL on an easy drive.
     """
     _, result = table_run
     s = result.sequences[0]
