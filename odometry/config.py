@@ -77,6 +77,9 @@ class OdometryConfig:
             accumulated motion of this registration.
         min_points: fewer filtered points or matches than this: the frame is
             flagged and its pose extrapolated.
+        max_prediction_error_m, max_prediction_error_deg: an estimate farther than this
+            from the constant-velocity prediction (10 m/s^2 of sudden acceleration at
+            10 Hz is 0.1 m) is a failed registration: flagged, pose extrapolated.
         degenerate_eigenvalue: flag a frame whose smallest translational
             eigenvalue of the per-match information (H / N) is below this.
     """
@@ -107,6 +110,8 @@ class OdometryConfig:
     abs_rotation_tol_deg: float = 1e-3
     rel_tolerance: float = 1e-4
     min_points: int = 100
+    max_prediction_error_m: float = 1.0
+    max_prediction_error_deg: float = 10.0
     degenerate_eigenvalue: float = 0.01
 
     def __post_init__(self) -> None:
@@ -114,7 +119,8 @@ class OdometryConfig:
             raise ConfigError(f"odometry config '{self.name}': key '{key}' {problem}")
 
         positive = ("voxel_size_m", "ncf_point_noise_std_m", "ncf_max_normal_std_deg", "max_range_m",
-                    "max_correspondence_distance_m", "abs_translation_tol_m", "abs_rotation_tol_deg")
+                    "max_correspondence_distance_m", "abs_translation_tol_m", "abs_rotation_tol_deg",
+                    "max_prediction_error_m", "max_prediction_error_deg")
         for key in positive:
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0:

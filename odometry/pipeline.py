@@ -57,20 +57,21 @@ class FrameDiagnostics:
     degenerate: bool = False
     singular: bool = False
     too_few_points: bool = False
+    implausible: bool = False
     deskewed: bool = False
     seconds: dict = field(default_factory=dict)
 
     @property
     def extrapolated(self) -> bool:
         """The pose is the constant-velocity guess, not an ICP result."""
-        return self.frame > 0 and (self.singular or self.too_few_points)
+        return self.frame > 0 and (self.singular or self.too_few_points or self.implausible)
 
 
 CSV_COLUMNS = (
     ["frame", "points_raw", "points_nonfinite", "points_in_range", "voxels", "after_ncf", "after_curvature",
      "candidates", "after_distance", "after_gcr", "after_trimmed", "iterations", "converged", "rms_m"]
     + [f"eig{k}" for k in range(6)] + ["t_eig0", "t_eig1", "t_eig2"]
-    + ["degenerate", "singular", "too_few_points", "extrapolated", "deskewed"]
+    + ["degenerate", "singular", "too_few_points", "implausible", "extrapolated", "deskewed"]
     + ["s_deskew", "s_voxel", "s_normals", "s_ncf_curvature", "s_match", "s_reject", "s_estimate", "s_total"]
 )
 
@@ -82,7 +83,8 @@ def diagnostics_row(d: FrameDiagnostics) -> list:
          fc.get("curvature", ""), m.get("candidates", ""), m.get("distance", ""), m.get("gcr", ""),
          m.get("trimmed", ""), d.iterations, int(d.converged), f"{d.rms_m:.6g}"]
         + [f"{v:.6g}" for v in d.info_eigenvalues] + [f"{v:.6g}" for v in d.translation_eigenvalues]
-        + [int(d.degenerate), int(d.singular), int(d.too_few_points), int(d.extrapolated), int(d.deskewed)]
+        + [int(d.degenerate), int(d.singular), int(d.too_few_points), int(d.implausible), int(d.extrapolated),
+           int(d.deskewed)]
         + [f"{s.get(k, 0.0):.6f}" for k in ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject",
                                            "estimate", "total")]
     )
@@ -116,6 +118,7 @@ class Odometry:
         self._last_stamp: float | None = None
         self._last_period: float | None = None
         self._use_gcr = False
+        self._previous_motion = np.eye(4)  # the motion the stored target was de-skewed with
 
     @property
     def last(self) -> FrameDiagnostics | None:
@@ -192,10 +195,22 @@ class Odometry:
             # closer), so plain re-use of the estimate oscillates: move the de-skew motion
             # halfway towards the estimate (a damped fixed-point iteration) and refine.
             # Only the filtered points are moved, so this is cheap.
+            first = len(self.poses) == 1
             for _ in range(cfg.deskew_refinements if deskewing else 0):
                 if result.singular:
                     break
-                M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(result.T_target_source)))
+                if first and self._previous.times_s is not None and cfg.match_target == "filtered":
+                    # Cold start: the first two scans were de-skewed as if standing still. Both
+                    # are re-de-skewed with the estimate, so source and target stay consistent
+                    # and the estimate can be taken as it is.
+                    M = result.T_target_source
+                    prev = self._previous
+                    prev.points, prev.normals = redeskew(prev.points, prev.normals, prev.times_s,
+                                                         self._previous_motion, M, period)
+                    self._previous_motion = M
+                    self._target = self._make_target(prev)
+                else:
+                    M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(result.T_target_source)))
                 scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, M, period)
                 T_deskew = M
                 result = register(self._source(scan), self._target, result.T_target_source, cfg,
@@ -203,6 +218,13 @@ class Odometry:
             self._record(diag, result)
             seconds.update(result.seconds)
             T = result.T_target_source
+            # A car cannot change its motion by metres within one frame: such an estimate is
+            # a failed registration (degenerate scene, wrong local minimum), not motion.
+            deviation = se3.inverse(T_guess) @ T
+            if not first and (np.linalg.norm(deviation[:3, 3]) > cfg.max_prediction_error_m
+                              or np.degrees(se3.rotation_angle(deviation)) > cfg.max_prediction_error_deg):
+                diag.implausible = True
+                T = T_guess
 
         # update; the next target is this scan de-skewed with the motion just estimated,
         # so that source and target of the next registration share one motion model
@@ -220,14 +242,16 @@ class Odometry:
                     scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
                 seconds["deskew"] += time.perf_counter() - t
             self._previous = scan
+            self._previous_motion = T if deskewing and len(self.poses) > 1 else T_deskew
             self._target = self._make_target(scan)
         self._last_period = period
         seconds["total"] = time.perf_counter() - t_start
         diag.seconds = seconds
         self.diagnostics.append(diag)
         if diag.extrapolated:
-            log.warning("frame %d: %s; pose extrapolated", diag.frame,
-                        "too few points after filtering" if diag.too_few_points else "singular system")
+            why = ("too few points after filtering" if diag.too_few_points else "singular system" if diag.singular
+                   else "estimate too far from the constant-velocity prediction")
+            log.warning("frame %d: %s; pose extrapolated", diag.frame, why)
         return pose
 
     # ---- helpers

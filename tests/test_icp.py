@@ -145,3 +145,27 @@ def test_config_validation_and_yaml(tmp_path):
     p.write_text("voxel_size_m: -1\n")
     with pytest.raises(ConfigError, match="c.yaml"):
         load_config(p)
+
+
+def test_implausible_estimate_is_flagged_and_extrapolated():
+    """An estimate farther from the constant-velocity prediction than the config allows
+    (here 1 cm, while the platform accelerates by 20 cm per frame) is not trusted."""
+    rng = np.random.default_rng(4)
+    q, _ = planes_cloud(rng, 4000)
+    cfg = BL.replace(normal_neighbours=10, min_range_m=0.1, deskew=False, max_prediction_error_m=0.01)
+    odo = Odometry(cfg)
+    steps = [np.eye(4), se3.exp(np.r_[0.2, 0, 0, 0, 0, 0]), se3.exp(np.r_[0.4, 0, 0, 0, 0, 0])]
+    pose = np.eye(4)
+    for k, step in enumerate(steps):
+        pose = pose @ step
+        odo.register(se3.transform_points(se3.inverse(pose), q))
+        if k == 1:
+            assert not odo.last.implausible  # the first registration has no prediction to compare with
+    assert odo.last.implausible and odo.last.extrapolated
+    assert np.allclose(odo.poses[2], odo.poses[1] @ (se3.inverse(odo.poses[0]) @ odo.poses[1]))
+    loose = Odometry(cfg.replace(max_prediction_error_m=1.0))
+    pose = np.eye(4)
+    for step in steps:
+        pose = pose @ step
+        loose.register(se3.transform_points(se3.inverse(pose), q))
+    assert not loose.last.implausible and np.abs(loose.poses[2] - pose).max() < 5e-3
