@@ -274,7 +274,7 @@ def cmd_sensors(args) -> int:
 def _add_demo(sub) -> None:
     p = sub.add_parser("demo", help="the README's demo: simulate, run the odometry, plot")
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    p.add_argument("--frames", type=int, default=30, help="frames to simulate (default 30)")
+    p.add_argument("--frames", type=int, default=150, help="frames to simulate (default 150: >= 100 m of path)")
     p.set_defaults(func=cmd_demo)
 
 

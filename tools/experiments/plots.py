@@ -30,7 +30,7 @@ def _save(fig, path: str | Path, dpi: int = 110) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
     try:
-        fig.savefig(tmp, dpi=dpi)
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")  # never crop a legend or a label
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -101,7 +101,7 @@ def trajectory_plot(path, gt: np.ndarray, est: dict, errs: dict | None = None, t
     """Top view of ground truth (N, 4, 4) and each method's poses (name -> (N, 4, 4)), in metres."""
     lo, hi = _view(gt, square=False)
     ratio = float((hi[1] - lo[1]) / (hi[0] - lo[0]))
-    width = 9.0 if ratio <= 1 else max(5.0, 8.0 / ratio)
+    width = 9.0 if ratio <= 1 else max(7.0, 8.0 / ratio)  # wide enough for a two-column legend
     fig = _figure(figsize=(width, min(9.0, max(3.0, width * ratio)) + 1.6))
     ax = fig.subplots()
     _draw_tracks(ax, gt, est, errs, segment_length_m, square=False)
