@@ -189,7 +189,8 @@ class Odometry:
             # close initial guess; the first registration has no motion to extrapolate and
             # starts from identity, so it runs without GCR.
             self._use_gcr = cfg.gcr and len(self.poses) > 1
-            result = register(self._source(scan), self._target, T_guess, cfg, self._rejectors())
+            source = self._source(scan)
+            result = register(source, self._target, T_guess, cfg, self._rejectors())
             # The de-skew used the previous frame's motion. The estimate responds to the
             # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
             # closer), so plain re-use of the estimate oscillates: move the de-skew motion
@@ -213,8 +214,10 @@ class Odometry:
                     M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(result.T_target_source)))
                 scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, M, period)
                 T_deskew = M
-                result = register(self._source(scan), self._target, result.T_target_source, cfg,
-                                  self._rejectors())
+                # The GCR thresholds scale with range and incidence, which a re-de-skew by a
+                # few centimetres does not change: they are reused.
+                source = Source(scan.points, scan.normals, source.gcr_threshold_m)
+                result = register(source, self._target, result.T_target_source, cfg, self._rejectors())
             self._record(diag, result)
             seconds.update(result.seconds)
             T = result.T_target_source
