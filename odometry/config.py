@@ -22,6 +22,8 @@ from pathlib import Path
 
 import yaml
 
+from simlidar.yaml_file import read_yaml
+
 NOISE_MODELS = ("range", "isotropic")
 MATCH_TARGETS = ("filtered", "raw")
 GCR_FORMULAS = ("beam", "paper")
@@ -192,11 +194,5 @@ def config_from_dict(data: dict, base: OdometryConfig | None = None, origin: str
 
 def load_config(path: str | Path, base: OdometryConfig | None = None) -> OdometryConfig:
     """Read an odometry config YAML file (any subset of the parameters)."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, ConfigError, "config") or {}
     return config_from_dict(data, base, origin=str(path))

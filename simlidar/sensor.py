@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .yaml_file import read_yaml
+
 REQUIRED_KEYS = (
     "name",
     "rings",
@@ -320,13 +322,7 @@ def from_dict(data: dict, origin: str = "sensor description") -> LidarModel:
 
 def load_sensor_file(path: str | Path) -> LidarModel:
     """Read and validate a sensor YAML file."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise SensorError(f"{path}: cannot read sensor file ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise SensorError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, SensorError, "sensor file")
     return from_dict(data, origin=str(path))
 
 

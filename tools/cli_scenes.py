@@ -37,15 +37,10 @@ def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> d
     """
     out: dict[str, Any] = {}
     if yaml_file is not None:
-        import yaml
+        from simlidar.yaml_file import read_yaml
 
         path = Path(yaml_file)
-        try:
-            data = yaml.safe_load(path.read_text())
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read parameter file ({exc.strerror or exc})") from None
-        except yaml.YAMLError as exc:
-            raise ValueError(f"{path}: not valid YAML ({exc})") from None
+        data = read_yaml(path, ValueError, "parameter file")
         if data is None:
             data = {}
         if not isinstance(data, dict) or not all(isinstance(k, str) for k in data):

@@ -38,6 +38,7 @@ from typing import Any
 from odometry.config import VARIANTS, ConfigError, OdometryConfig, config_from_dict, variant
 from simlidar.dataset import FORMAT_VERSION
 from simlidar.sensor import LidarModel, SensorError, load_sensor
+from simlidar.yaml_file import read_yaml
 
 DEFAULT_SCENES = ("city",)
 DEFAULT_SEEDS = (0,)
@@ -233,15 +234,8 @@ class SweepSpec:
 # ---------------------------------------------------------------- parsing
 def load_spec(path: str | Path) -> SweepSpec:
     """Read and validate a sweep spec YAML file; sensor files are relative to its folder."""
-    import yaml
-
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise SpecError(f"{path}: cannot read the sweep spec ({exc.strerror or exc})") from None
-    except yaml.YAMLError as exc:
-        raise SpecError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, SpecError, "the sweep spec")
     return spec_from_dict(data if data is not None else {}, origin=str(path), base_dir=path.parent)
 
 
