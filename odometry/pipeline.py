@@ -119,6 +119,7 @@ class Odometry:
         self._last_period: float | None = None
         self._use_gcr = False
         self._previous_motion = np.eye(4)  # the motion the stored target was de-skewed with
+        self._target_pose = np.eye(4)  # pose of the target scan (T_first_lidar)
 
     @property
     def last(self) -> FrameDiagnostics | None:
@@ -189,8 +190,12 @@ class Odometry:
             # close initial guess; the first registration has no motion to extrapolate and
             # starts from identity, so it runs without GCR.
             self._use_gcr = cfg.gcr and len(self.poses) > 1
+            # The target is the last scan that had points: usually the previous frame, else
+            # older; poses go through it (T_target_source) and back to a per-frame motion.
+            to_frame = se3.inverse(self.poses[-1]) @ self._target_pose  # previous frame <- target
+            T_init = se3.inverse(to_frame) @ T_guess
             source = self._source(scan)
-            result = register(source, self._target, T_guess, cfg, self._rejectors())
+            result = register(source, self._target, T_init, cfg, self._rejectors())
             # The de-skew used the previous frame's motion. The estimate responds to the
             # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
             # closer), so plain re-use of the estimate oscillates: move the de-skew motion
@@ -200,18 +205,19 @@ class Odometry:
             for _ in range(cfg.deskew_refinements if deskewing else 0):
                 if result.singular:
                     break
+                motion = to_frame @ result.T_target_source  # this frame's estimated motion
                 if first and self._previous.times_s is not None and cfg.match_target == "filtered":
                     # Cold start: the first two scans were de-skewed as if standing still. Both
                     # are re-de-skewed with the estimate, so source and target stay consistent
                     # and the estimate can be taken as it is.
-                    M = result.T_target_source
+                    M = motion
                     prev = self._previous
                     prev.points, prev.normals = redeskew(prev.points, prev.normals, prev.times_s,
                                                          self._previous_motion, M, period)
                     self._previous_motion = M
                     self._target = self._make_target(prev)
                 else:
-                    M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(result.T_target_source)))
+                    M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
                 scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, M, period)
                 T_deskew = M
                 # The GCR thresholds scale with range and incidence, which a re-de-skew by a
@@ -220,7 +226,7 @@ class Odometry:
                 result = register(source, self._target, result.T_target_source, cfg, self._rejectors())
             self._record(diag, result)
             seconds.update(result.seconds)
-            T = result.T_target_source
+            T = to_frame @ result.T_target_source
             # A car cannot change its motion by metres within one frame: such an estimate is
             # a failed registration (degenerate scene, wrong local minimum), not motion.
             deviation = se3.inverse(T_guess) @ T
@@ -247,6 +253,7 @@ class Odometry:
             self._previous = scan
             self._previous_motion = T if deskewing and len(self.poses) > 1 else T_deskew
             self._target = self._make_target(scan)
+            self._target_pose = pose
         self._last_period = period
         seconds["total"] = time.perf_counter() - t_start
         diag.seconds = seconds

@@ -117,8 +117,10 @@ def test_constant_velocity_extrapolation_when_a_frame_is_empty():
     assert np.allclose(pose, odo.poses[1] @ (se3.inverse(odo.poses[0]) @ odo.poses[1]))
     nan_scan = se3.transform_points(se3.inverse(step @ step @ step), q)
     nan_scan[:100] = np.nan
-    odo.register(nan_scan)
+    pose = odo.register(nan_scan)
     assert odo.last.points_nonfinite == 100 and not odo.last.extrapolated
+    # registered against the last scan with points (two frames back), not the empty one
+    assert np.abs(pose - step @ step @ step).max() < 5e-3
 
 
 def test_gcr_without_sensor_is_a_clear_error():
