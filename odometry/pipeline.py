@@ -119,7 +119,8 @@ class Odometry:
         self._last_period: float | None = None
         self._use_gcr = False
         self._previous_motion = np.eye(4)  # the motion the stored target was de-skewed with
-        self._target_pose = np.eye(4)  # pose of the target scan (T_first_lidar)
+        self._target_pose = np.eye(4)  # pose of the target scan (T_first_lidar) and its frame index
+        self._target_frame = 0
 
     @property
     def last(self) -> FrameDiagnostics | None:
@@ -192,7 +193,8 @@ class Odometry:
             self._use_gcr = cfg.gcr and len(self.poses) > 1
             # The target is the last scan that had points: usually the previous frame, else
             # older; poses go through it (T_target_source) and back to a per-frame motion.
-            to_frame = se3.inverse(self.poses[-1]) @ self._target_pose  # previous frame <- target
+            to_frame = (np.eye(4) if self._target_frame == len(self.poses) - 1  # previous frame <- target
+                        else np.linalg.inv(self.poses[-1]) @ self._target_pose)
             T_init = se3.inverse(to_frame) @ T_guess
             source = self._source(scan)
             result = register(source, self._target, T_init, cfg, self._rejectors())
@@ -254,6 +256,7 @@ class Odometry:
             self._previous_motion = T if deskewing and len(self.poses) > 1 else T_deskew
             self._target = self._make_target(scan)
             self._target_pose = pose
+            self._target_frame = len(self.poses) - 1
         self._last_period = period
         seconds["total"] = time.perf_counter() - t_start
         diag.seconds = seconds
