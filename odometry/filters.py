@@ -11,7 +11,9 @@ The steps, in the paper's order:
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,6 +22,16 @@ from scipy.spatial import cKDTree
 from .config import OdometryConfig
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import estimate_normals
+
+_tree_builders: dict[int, ThreadPoolExecutor] = {}
+
+
+def _tree_builder() -> ThreadPoolExecutor:
+    """This process's background thread for k-d tree builds (a forked child gets its own)."""
+    pid = os.getpid()
+    if pid not in _tree_builders:
+        _tree_builders[pid] = ThreadPoolExecutor(max_workers=1, thread_name_prefix="raw-kdtree")
+    return _tree_builders[pid]
 
 
 def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray | None = None):
@@ -32,8 +44,9 @@ def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray 
     if len(points) == 0:
         return np.zeros((0, 3)) if values is None else (np.zeros((0, 3)), np.zeros(0))
     keys = np.floor(points / voxel_size_m).astype(np.int64)
-    keys -= keys.min(axis=0)
-    span = keys.max(axis=0) + 1
+    # per column: numpy reduces a (N, 3) array along axis 0 about 15x slower
+    keys -= [keys[:, c].min() for c in range(3)]
+    span = [keys[:, c].max() + 1 for c in range(3)]
     flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
     _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
     sums = np.stack([np.bincount(inverse, weights=points[:, c], minlength=len(counts)) for c in range(3)], axis=1)
@@ -100,11 +113,14 @@ def filter_scan(
     """Filter a de-skewed raw scan (N, 3) into ICP points with normals (see module doc)."""
     seconds: dict[str, float] = {}
     t = time.perf_counter()
+    # The raw k-d tree (for the normals) is built on a second core while this one
+    # computes the voxel grid: both release the GIL, and the two take about as long.
+    building = _tree_builder().submit(cKDTree, raw_points, balanced_tree=False, compact_nodes=False)
     if raw_times_s is None:
         centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m), None
     else:
         centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m, raw_times_s)
-    tree = cKDTree(raw_points, balanced_tree=False, compact_nodes=False)
+    tree = building.result()
     seconds["voxel"] = time.perf_counter() - t
     counts = {"raw": len(raw_points), "voxels": len(centroids)}
 

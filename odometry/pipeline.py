@@ -152,7 +152,8 @@ class Odometry:
         points = np.asarray(points, dtype=np.float64)
         finite = np.all(np.isfinite(points), axis=1)
         diag.points_nonfinite = int((~finite).sum())
-        r = np.linalg.norm(np.where(finite[:, None], points, 0.0), axis=1)
+        safe = np.where(finite[:, None], points, 0.0)
+        r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
         keep = finite & (r >= cfg.min_range_m) & (r <= cfg.max_range_m)
         points = points[keep]
         times_s = None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep]
@@ -198,6 +199,7 @@ class Odometry:
             T_init = se3.inverse(to_frame) @ T_guess
             source = self._source(scan)
             result = register(source, self._target, T_init, cfg, self._rejectors())
+            icp_seconds = dict(result.seconds)
             # The de-skew used the previous frame's motion. The estimate responds to the
             # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
             # closer), so plain re-use of the estimate oscillates: move the de-skew motion
@@ -226,8 +228,10 @@ class Odometry:
                 # few centimetres does not change: they are reused.
                 source = Source(scan.points, scan.normals, source.gcr_threshold_m)
                 result = register(source, self._target, result.T_target_source, cfg, self._rejectors())
+                for stage, spent in result.seconds.items():  # the stage times cover every registration
+                    icp_seconds[stage] += spent
             self._record(diag, result)
-            seconds.update(result.seconds)
+            seconds.update(icp_seconds)
             T = to_frame @ result.T_target_source
             # A car cannot change its motion by metres within one frame: such an estimate is
             # a failed registration (degenerate scene, wrong local minimum), not motion.
