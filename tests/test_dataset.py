@@ -232,6 +232,26 @@ def test_cli_bad_input(tmp_path, capsys):
     assert "already exists" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["simulate", "--scene", "city", "--frames", "0"], "argument --frames: must be at least 1, got 0"),
+        (["simulate", "--scene", "city", "--noise-std", "-0.01"], "argument --noise-std: must be at least 0"),
+        (["simulate", "--scene", "city", "--speed", "0"], "argument --speed: must be above 0"),
+        (["simulate", "--scene", "city", "--start", "nan"], "argument --start: must be finite"),
+        (["demo", "--frames", "1"], "argument --frames: must be at least 2, got 1"),
+        (["experiment", "rejectors", "--pairs", "zero"], "argument --pairs: not a whole number: 'zero'"),
+        (["sweep", "spec.yaml", "--workers", "-1"], "argument --workers: must be at least 0, got -1"),
+    ],
+)
+def test_cli_refuses_bad_numbers_before_any_work(tmp_path, capsys, argv, words):
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_:
+        salo([*argv, "--out", str(out)])
+    assert exit_.value.code == 2 and words in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_check_clear_uses_each_frame(tmp_path):
     # a path that enters a solid block at frame 3 is refused before anything is written
     import trimesh

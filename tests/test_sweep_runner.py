@@ -20,7 +20,7 @@ import yaml
 
 from odometry.metrics import evaluate_trajectory
 from simlidar.dataset import read_kitti_poses
-from tools import cli_sweep
+from tools import cli
 from tools.sweep import (
     DaskExecutor,
     InlineExecutor,
@@ -212,7 +212,7 @@ SUITE = {"name": "suite", "scenes": ["city"], "sensors": ["vlp16"], "noise_std_m
 
 
 def _regress(capsys, *args) -> tuple[int, str]:
-    code = cli_sweep.main(["regress", "--workers", "0", *map(str, args)])
+    code = cli.main(["regress", "--workers", "0", *map(str, args)])
     out = capsys.readouterr()
     return code, out.out + out.err
 

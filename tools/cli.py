@@ -13,6 +13,7 @@ from pathlib import Path
 
 from simlidar.dataset import DatasetError
 from simlidar.sensor import SensorError, load_sensor, preset_names
+from tools.argtypes import real_number, whole_number
 
 # Errors that are the user's input, reported in one line without a traceback.
 USER_ERRORS: tuple[type[BaseException], ...] = (SensorError, DatasetError, FileExistsError)
@@ -41,8 +42,9 @@ def _add_simulate(sub) -> None:
     p.add_argument("--set", dest="scene_overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter (repeatable)")
     p.add_argument("--scene-params", type=Path, help="YAML file of scene parameters")
-    p.add_argument("--speed", type=float, help="cruise speed along the scene's path, m/s")
-    p.add_argument("--start", type=float, default=0.0, help="time along the path of the first sweep, s (default 0)")
+    p.add_argument("--speed", type=real_number(0.0, above=True), help="cruise speed along the scene's path, m/s")
+    p.add_argument("--start", type=real_number(), default=0.0,
+                   help="time along the path of the first sweep, s (default 0)")
     world = p.add_argument_group("your own world and path (instead of --scene)")
     world.add_argument("--mesh", type=Path, help="world mesh: PLY, OBJ, GLB or STL")
     world.add_argument(
@@ -53,9 +55,11 @@ def _add_simulate(sub) -> None:
     )
     world.add_argument("--times", type=Path, help="times of the --poses lines, s (default: 1/rate apart)")
     p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
-    p.add_argument("--frames", type=int, help="number of sweeps (default: one per pose, or 100 along a scene)")
+    p.add_argument("--frames", type=whole_number(1),
+                   help="number of sweeps (default: one per pose, or 100 along a scene)")
     p.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
-    p.add_argument("--noise-std", type=float, help="range noise standard deviation, m (overrides the sensor)")
+    p.add_argument("--noise-std", type=real_number(0.0),
+                   help="range noise standard deviation, m (overrides the sensor)")
     p.add_argument(
         "--no-motion-distortion",
         dest="motion_distortion",
@@ -274,7 +278,8 @@ def cmd_sensors(args) -> int:
 def _add_demo(sub) -> None:
     p = sub.add_parser("demo", help="the README's demo: simulate, run the odometry, plot")
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    p.add_argument("--frames", type=int, default=150, help="frames to simulate (default 150: >= 100 m of path)")
+    p.add_argument("--frames", type=whole_number(2), default=150,
+                   help="frames to simulate (default 150: >= 100 m of path)")
     p.set_defaults(func=cmd_demo)
 
 
@@ -316,7 +321,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"salo {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"salo {args.command}: interrupted", file=sys.stderr)
+        resume = " (run it again to resume)" if args.command in ("sweep", "regress") else ""
+        print(f"salo {args.command}: interrupted{resume}", file=sys.stderr)
         return 130
 
 

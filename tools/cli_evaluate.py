@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from simlidar.dataset import DatasetError
+from tools.argtypes import whole_number
 
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
@@ -46,22 +47,12 @@ def add_commands(subparsers) -> None:
     )
     p.add_argument(
         "--rpe-delta",
-        type=_positive_int,
+        type=whole_number(1),
         default=1,
         metavar="FRAMES",
         help="frame spacing of the relative pose error pairs (default 1: consecutive frames)",
     )
     p.set_defaults(func=cmd_evaluate)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
 
 
 def load_pair(gt_path: Path, est_path: Path) -> tuple[np.ndarray, np.ndarray]:

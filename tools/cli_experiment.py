@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from tools.argtypes import real_number, whole_number
+
 DEFAULT_ROOT = Path("out/experiments")
 DEFAULT_CACHE = DEFAULT_ROOT / "sequences"
 TABLE_QUICK_FRAMES = 25
@@ -55,10 +57,11 @@ def _common(p, name: str) -> None:
 
 def _sequence_args(p, default_text: str, quick_frames: int) -> None:
     p.add_argument("--sequences", help=f"comma-separated SCENE[:SEED[:FRAMES]] (default {default_text})")
-    p.add_argument("--frames", type=int, help=f"frames per sequence (default 300; --quick {quick_frames})")
+    p.add_argument("--frames", type=whole_number(2), help=f"frames per sequence (default 300; --quick {quick_frames})")
     p.add_argument("--sensor", default="salo32", help="sensor preset or YAML (default salo32)")
-    p.add_argument("--noise-std", type=float, default=0.02, help="range noise, 1 sigma, m (default 0.02)")
-    p.add_argument("--start", type=float, help="time along each path of the first sweep, s (default 0; --quick 10)")
+    p.add_argument("--noise-std", type=real_number(0.0), default=0.02, help="range noise, 1 sigma, m (default 0.02)")
+    p.add_argument("--start", type=real_number(),
+                   help="time along each path of the first sweep, s (default 0; --quick 10)")
 
 
 def _add_table(sub) -> None:
@@ -73,8 +76,9 @@ def _add_table(sub) -> None:
     _common(p, "table")
     _sequence_args(p, "city:1,city:2,city:3,tunnel:1,highway:1,open:1", TABLE_QUICK_FRAMES)
     p.add_argument("--methods", default="bl,ncf,salo,kiss-icp", help="comma-separated (default all four)")
-    p.add_argument("--segment-length", type=float, help="segment length, m (default 100; --quick 10)")
-    p.add_argument("--step-frames", type=int, help="frames between segment starts (default 10; --quick 5)")
+    p.add_argument("--segment-length", type=real_number(0.0, above=True),
+                   help="segment length, m (default 100; --quick 10)")
+    p.add_argument("--step-frames", type=whole_number(1), help="frames between segment starts (default 10; --quick 5)")
     p.set_defaults(func=cmd_table)
 
 
@@ -89,7 +93,7 @@ def _add_rejectors(sub) -> None:
     )
     _common(p, "rejectors")
     _sequence_args(p, "city:1,city:2,city:3 (the table's)", REJECTORS_QUICK_FRAMES)
-    p.add_argument("--pairs", type=int, help="scan pairs (default 100, the paper's; --quick 4)")
+    p.add_argument("--pairs", type=whole_number(1), help="scan pairs (default 100, the paper's; --quick 4)")
     p.add_argument("--levels", help="comma-separated L_R_DEG:L_T_M (default 0:0,1:0.1,3:0.3,5:0.5,10:1)")
     p.add_argument("--targets", default="filtered,raw", help="match targets (default filtered,raw)")
     p.add_argument("--seed", type=int, default=0, help="seed of the pair and noise draws (default 0)")
@@ -108,7 +112,8 @@ def _add_ncf(sub) -> None:
     p.add_argument("--scans", help="comma-separated SCENE[:SEED] (default city:1,city:2,tunnel:1,open:1)")
     p.add_argument("--sensor", default="salo32", help="sensor preset or YAML (default salo32)")
     p.add_argument("--noise-levels", help="comma-separated range noise sigmas, m (default 0.005,0.01,0.02,0.04)")
-    p.add_argument("--max-points", type=int, help="subsample ICP points per scan (default all; --quick 1500)")
+    p.add_argument("--max-points", type=whole_number(1),
+                   help="subsample ICP points per scan (default all; --quick 1500)")
     p.add_argument("--seed", type=int, default=0, help="seed of the subsampling (default 0)")
     p.set_defaults(func=cmd_ncf)
 

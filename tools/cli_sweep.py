@@ -6,10 +6,11 @@ over ``tools.sweep``: parse, call the library, print.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from pathlib import Path
+
+from tools.argtypes import whole_number
 
 
 def _command_error(message: str) -> Exception:
@@ -18,19 +19,9 @@ def _command_error(message: str) -> Exception:
     return CommandError(message)
 
 
-def _workers(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
 def _add_executor_args(p) -> None:
     g = p.add_argument_group("where the runs execute")
-    g.add_argument("--workers", type=_workers, default=os.cpu_count() or 1, metavar="N",
+    g.add_argument("--workers", type=whole_number(0), default=os.cpu_count() or 1, metavar="N",
                    help="local worker processes (default: one per core, here %(default)s; 0: in this process)")
     g.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask distributed cluster, e.g. tcp://host:8786 (needs the 'cluster' extra; "
@@ -262,31 +253,3 @@ def _print_figures(rows, baseline, tolerance) -> None:
                 text += f" (was {then:.4g})"
             cells.append(f"{text:>24s}")
         print(f"{r['label']:40s} " + " ".join(cells))
-
-
-# ---------------------------------------------------------------- standalone
-def main(argv: list[str] | None = None) -> int:
-    """``python -m tools.cli_sweep sweep|regress ...``: the same commands as ``salo sweep|regress``."""
-    import logging
-
-    from tools import cli
-
-    parser = argparse.ArgumentParser(prog="salo", description="salo's sweep and regress commands")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    add_commands(sub)
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
-    try:
-        return int(args.func(args) or 0)
-    except (*cli.USER_ERRORS, cli.CommandError) as exc:
-        print(f"salo {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"salo {args.command}: interrupted (run it again to resume)", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())
