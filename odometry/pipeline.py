@@ -41,7 +41,12 @@ class OdometryError(ValueError):
 
 @dataclass
 class FrameDiagnostics:
-    """What happened to one frame (one row of the diagnostics CSV)."""
+    """What happened to one frame (one row of the diagnostics CSV).
+
+    ``iterations`` and the ICP stage ``seconds`` add up every registration of the
+    frame (the first and the de-skew refinements); matches, convergence, residual
+    and eigenvalues are those of the last.
+    """
 
     frame: int
     points_raw: int = 0
@@ -199,7 +204,7 @@ class Odometry:
             T_init = se3.inverse(to_frame) @ T_guess
             source = self._source(scan)
             result = register(source, self._target, T_init, cfg, self._rejectors())
-            icp_seconds = dict(result.seconds)
+            icp_seconds, icp_iterations = dict(result.seconds), result.iterations
             # The de-skew used the previous frame's motion. The estimate responds to the
             # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
             # closer), so plain re-use of the estimate oscillates: move the de-skew motion
@@ -228,9 +233,11 @@ class Odometry:
                 # few centimetres does not change: they are reused.
                 source = Source(scan.points, scan.normals, source.gcr_threshold_m)
                 result = register(source, self._target, result.T_target_source, cfg, self._rejectors())
-                for stage, spent in result.seconds.items():  # the stage times cover every registration
+                for stage, spent in result.seconds.items():  # stage times and iterations cover every registration
                     icp_seconds[stage] += spent
+                icp_iterations += result.iterations
             self._record(diag, result)
+            diag.iterations = icp_iterations
             seconds.update(icp_seconds)
             T = to_frame @ result.T_target_source
             # A car cannot change its motion by metres within one frame: such an estimate is
