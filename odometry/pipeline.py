@@ -275,7 +275,9 @@ class Odometry:
         if diag.extrapolated:
             why = ("too few points after filtering" if diag.too_few_points else "singular system" if diag.singular
                    else "estimate too far from the constant-velocity prediction")
-            log.warning("frame %d: %s; pose extrapolated", diag.frame, why)
+            # INFO, not WARNING: a degenerate stretch flags frame after frame, which would bury a
+            # progress bar; the diagnostics carry the flags and the commands print their count.
+            log.info("frame %d: %s; pose extrapolated", diag.frame, why)
         return pose
 
     # ---- helpers

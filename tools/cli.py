@@ -241,7 +241,8 @@ def cmd_odometry(args) -> int:
         bar.close()
     out.parent.mkdir(parents=True, exist_ok=True)
     write_kitti_poses(out, run.poses)
-    write_diagnostics_csv(out.with_name(out.stem + "_diagnostics.csv"), run.diagnostics)
+    diagnostics_csv = out.with_name(out.stem + "_diagnostics.csv")
+    write_diagnostics_csv(diagnostics_csv, run.diagnostics)
     (out.with_name(out.stem + "_config.yaml")).write_text(config.to_yaml())
     if args.tum:
         times = run.times_s if run.times_s is not None else default_times(len(run.poses), seq.sensor)
@@ -250,7 +251,8 @@ def cmd_odometry(args) -> int:
     degenerate = sum(d.degenerate for d in run.diagnostics)
     print(f"{len(run.poses)} frames at {run.frames_per_second:.1f} frames/s -> {out}")
     if flagged or degenerate:
-        print(f"  {flagged} frames extrapolated (too few points or singular), {degenerate} flagged degenerate")
+        print(f"  {flagged} frames extrapolated (too few points, singular system or an estimate far from the "
+              f"constant-velocity prediction), {degenerate} flagged degenerate: see {diagnostics_csv}")
     return 0
 
 
