@@ -24,7 +24,6 @@ def whole_number(minimum: int) -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
         return value
 
-    parse.__name__ = f"whole number >= {minimum}"  # argparse names the type in its messages
     return parse
 
 
@@ -42,5 +41,4 @@ def real_number(minimum: float = -math.inf, above: bool = False) -> Callable[[st
             raise argparse.ArgumentTypeError(f"must be {'above' if above else 'at least'} {minimum:g}, got {value:g}")
         return value
 
-    parse.__name__ = "number"
     return parse
