@@ -90,7 +90,8 @@ def format_csv(summary: list[dict]) -> str:
 
 def plot_scene(rows: list[dict], scene: str, path: Path) -> Path:
     """Error against noise level for one scene: a line per variant (and sensor, if several), the mean
-    over seeds with the seeds' min..max as error bars. Two panels (see ``PLOT_METRICS``)."""
+    over seeds with the seeds' min..max as error bars and each seed as a dot. Two panels (see
+    ``PLOT_METRICS``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -107,20 +108,31 @@ def plot_scene(rows: list[dict], scene: str, path: Path) -> Path:
             name = f"{r['variant']} / {Path(str(r['sensor'])).stem}" if several_sensors else r["variant"]
             if _finite([r[metric]]):
                 lines[name][float(r["noise_std_m"])].append(float(r[metric]))
-        for name, by_noise in lines.items():
-            x = sorted(by_noise)
-            y = [sum(by_noise[n]) / len(by_noise[n]) for n in x]
-            lo = [yi - min(by_noise[n]) for n, yi in zip(x, y, strict=True)]
-            hi = [max(by_noise[n]) - yi for n, yi in zip(x, y, strict=True)]
-            ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=name)
-        ax.set_xlabel("range noise std (m)")
+        # Noise levels as evenly spaced categories (a lone level still gets a readable axis),
+        # each line shifted a little so that overlapping min..max bars stay apart.
+        levels = sorted({n for by_noise in lines.values() for n in by_noise})
+        slot = {n: i for i, n in enumerate(levels)}
+        for k, (name, by_noise) in enumerate(lines.items()):
+            shift = (k - (len(lines) - 1) / 2) * min(0.12, 0.6 / max(len(lines), 1))
+            noise = sorted(by_noise)
+            x = [slot[n] + shift for n in noise]
+            y = [sum(by_noise[n]) / len(by_noise[n]) for n in noise]
+            lo = [yi - min(by_noise[n]) for n, yi in zip(noise, y, strict=True)]
+            hi = [max(by_noise[n]) - yi for n, yi in zip(noise, y, strict=True)]
+            bar = ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=name)
+            seeds_x = [xi for xi, n in zip(x, noise, strict=True) for _ in by_noise[n]]
+            seeds_y = [v for n in noise for v in by_noise[n]]
+            ax.plot(seeds_x, seeds_y, ".", color=bar[0].get_color(), alpha=0.4, markersize=5)
+        ax.set_xticks(range(len(levels)), [f"{1000 * n:g} mm" for n in levels])
+        ax.set_xlim(-0.5, len(levels) - 0.5)
+        ax.set_xlabel("range noise std")
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
         if lines:
             ax.legend(fontsize="small")
         else:
             ax.text(0.5, 0.5, "no successful runs", ha="center", va="center", transform=ax.transAxes)
-    fig.suptitle(f"{scene}: error against range noise (mean over seeds, bars: min..max)")
+    fig.suptitle(f"{scene}: error against range noise (mean over seeds, bars: min..max, dots: seeds)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
