@@ -243,6 +243,14 @@ def padded(specs, point_step):
     """A structured dtype at explicit offsets: [(name, offset, datatype)]."""
     return cloud_dtype([PointFieldSpec(n, o, d) for n, o, d in specs], point_step)
 
+def xyz_record(frame, dtype):
+    """(N,) structured array of ``dtype`` with the frame's x, y, z filled (other fields zero)."""
+    rec = np.zeros(len(frame.points), dtype=dtype)
+    for i, axis in enumerate("xyz"):
+        rec[axis] = frame.points[:, i]
+    return rec
+
+
 
 @pytest.mark.parametrize("style", ["ouster_uint8_ring", "ouster_uint16_ring", "nebula"])
 def test_nanosecond_time_and_ring_variants(seq, tmp_path, style):
@@ -260,9 +268,7 @@ def test_nanosecond_time_and_ring_variants(seq, tmp_path, style):
     records, stamps = [], []
     for k in range(3):
         f = seq[k]
-        rec = np.zeros(len(f.points), dtype=dtype)
-        for i, axis in enumerate("xyz"):
-            rec[axis] = f.points[:, i]
+        rec = xyz_record(f, dtype)
         rec["intensity"] = f.intensity * (255 if style == "nebula" else 1)
         rec[ring_name] = 15 - f.ring if top_first else f.ring
         rec[time_name] = np.round(f.time_s * 1e9)
@@ -293,9 +299,7 @@ def test_absolute_float_timestamps(seq, tmp_path):
     records, stamps = [], []
     for k in range(2):
         f = seq[k]
-        rec = np.zeros(len(f.points), dtype=dtype)
-        for i, axis in enumerate("xyz"):
-            rec[axis] = f.points[:, i]
+        rec = xyz_record(f, dtype)
         rec["ring"] = f.ring
         rec["timestamp"] = DEFAULT_EPOCH_S + seq.times[k] + f.time_s
         records.append(rec)
@@ -315,9 +319,7 @@ def test_stamp_at_sweep_end(seq, tmp_path):
     records, stamps = [], []
     for k in range(3):
         f = seq[k]
-        rec = np.zeros(len(f.points), dtype=dtype)
-        for i, axis in enumerate("xyz"):
-            rec[axis] = f.points[:, i]
+        rec = xyz_record(f, dtype)
         rec["ring"] = f.ring
         rec["time"] = f.time_s - period
         records.append(rec)
@@ -491,9 +493,7 @@ def test_laser_id_order_mapped_through_the_sensor(seq, tmp_path, caplog):
     sensor = seq.sensor
     dtype = padded([("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("laser_id", 12, 4)], 14)
     f = seq[0]
-    rec = np.zeros(len(f.points), dtype=dtype)
-    for i, axis in enumerate("xyz"):
-        rec[axis] = f.points[:, i]
+    rec = xyz_record(f, dtype)
     rec["laser_id"] = sensor.laser_of_ring[f.ring]
     path = write_cloud_bag(tmp_path / "laser.mcap", [rec], [stamp_ns(seq, 0)])
     b = open_sequence(path, sensor=sensor)
