@@ -213,23 +213,32 @@ def write_ply_scan(path: str | Path, xyz: np.ndarray, fields: dict[str, np.ndarr
     header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {len(xyz)}\n"
     header += "".join(f"property {types[t.lstrip('<')]} {n}\n" for n, t in cols)
     header += "end_header\n"
-    _atomic_write_bytes(Path(path), header.encode("ascii") + rec.tobytes())
+    atomic_write_bytes(path, header.encode("ascii") + rec.tobytes())
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write a file so that readers see the old content or the new, never a part.
+
+    Written beside the target, synced, then renamed over it; a failed write leaves
+    no temporary file behind (the OSError propagates).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    tmp.replace(path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        tmp.replace(path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write a text file so that readers see the old content or the new, never a part."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write_bytes(path, text.encode("utf-8"))
+    """``atomic_write_bytes`` of UTF-8 text."""
+    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def sha256_file(path: Path) -> str:

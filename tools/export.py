@@ -62,7 +62,14 @@ import numpy as np
 
 from simlidar import se3
 from simlidar.bag import dtype_fields
-from simlidar.dataset import DatasetError, Frame, atomic_write_text, format_kitti_poses, write_ply_scan
+from simlidar.dataset import (
+    DatasetError,
+    Frame,
+    atomic_write_bytes,
+    atomic_write_text,
+    format_kitti_poses,
+    write_ply_scan,
+)
 
 log = logging.getLogger(__name__)
 
@@ -263,16 +270,9 @@ def world_poses(seq) -> np.ndarray | None:
 
 
 def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        tmp.replace(path)
+        atomic_write_bytes(path, data)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise ExportError(f"{path}: cannot write ({exc.strerror})") from None
 
 
