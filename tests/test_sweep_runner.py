@@ -270,3 +270,14 @@ def test_regress_evaluates_an_external_odometry_command(tmp_path, capsys):
     assert 0.02 < run[1]["ate_rmse_m"] < 0.2
     code, text = _regress(capsys, *common, "--baseline", baseline)
     assert code == 0 and "regress PASSED" in text
+
+
+def test_read_table_keeps_text_columns_as_text(tmp_path):
+    # run keys are hex: some look like numbers; versions like "2.0" must stay text too
+    path = tmp_path / "results.csv"
+    path.write_text("key,sim_key,numpy_version,seed,t_err_pct,sim_cached\n"
+                    "1234e56789012345,0123456789012345,2.0,3,0.25,true\n")
+    (row,) = read_table(path)
+    assert row["key"] == "1234e56789012345" and row["sim_key"] == "0123456789012345"
+    assert row["numpy_version"] == "2.0"
+    assert row["seed"] == 3 and row["t_err_pct"] == 0.25 and row["sim_cached"] is True

@@ -96,23 +96,30 @@ def format_table(rows: Iterable[dict]) -> str:
     return buf.getvalue()
 
 
-def read_table(path: str | Path) -> list[dict]:
-    """Read a results.csv back: numbers as int/float, true/false as bool, empty cells as None."""
+# Columns read back as numbers; every other column stays text (a hex run key such as
+# "1234e56789012345" or a version "2.0" must not turn into a number).
+NUMERIC_COLUMNS = frozenset(("seed", "noise_std_m", "frames", "speed_m_s", "start_s")
+                            + METRIC_COLUMNS + DIAGNOSTIC_COLUMNS + TIMING_COLUMNS)
 
-    def parse(text: str):
+
+def read_table(path: str | Path) -> list[dict]:
+    """Read a results.csv back: numeric columns as int/float, true/false as bool, empty cells as None."""
+
+    def parse(column: str, text: str):
         if text == "":
             return None
         if text in ("true", "false"):
             return text == "true"
-        for cast in (int, float):
-            try:
-                return cast(text)
-            except ValueError:
-                pass
+        if column in NUMERIC_COLUMNS:
+            for cast in (int, float):
+                try:
+                    return cast(text)
+                except ValueError:
+                    pass
         return text
 
     with open(path, newline="") as fh:
-        return [{k: parse(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+        return [{k: parse(k, v) for k, v in row.items()} for row in csv.DictReader(fh)]
 
 
 class Store:
