@@ -215,7 +215,7 @@ def cmd_odometry(args) -> int:
         write_kitti_poses,
         write_tum,
     )
-    from simlidar.dataset import open_sequence
+    from simlidar.dataset import atomic_write_text, open_sequence
 
     try:
         config = variant(args.variant)
@@ -243,7 +243,7 @@ def cmd_odometry(args) -> int:
     write_kitti_poses(out, run.poses)
     diagnostics_csv = out.with_name(out.stem + "_diagnostics.csv")
     write_diagnostics_csv(diagnostics_csv, run.diagnostics)
-    (out.with_name(out.stem + "_config.yaml")).write_text(config.to_yaml())
+    atomic_write_text(out.with_name(out.stem + "_config.yaml"), config.to_yaml())
     if args.tum:
         times = run.times_s if run.times_s is not None else default_times(len(run.poses), seq.sensor)
         write_tum(out.with_suffix(".tum"), run.poses, times)

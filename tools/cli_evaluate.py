@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -231,14 +230,11 @@ def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title
     if title:
         fig.suptitle(title)
 
-    # Write beside the target and rename, so a reader never sees half a PNG.
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
+    from tools.experiments.plots import save_png
+
     try:
-        fig.savefig(tmp, dpi=110)
-        tmp.replace(path)
+        save_png(fig, path)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise DatasetError(f"{path}: cannot write the plot ({exc.strerror})") from None
 
 

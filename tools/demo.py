@@ -125,14 +125,14 @@ def run_demo(out_dir: str | Path = "out/demo", frames: int = 30, progress: bool 
     }
     for name, draw in figures.items():
         draw(record.path(name))
-    record.path("table.md").write_text(table)
+    record.write_text("table.md", table)
     summary = ["# salo demo: BL, NCF and SALO on a short simulated city sequence", "",
                f"{frames} frames of `{spec.sensor}` (range noise {1000 * spec.noise_std_m:g} mm), {spec.scene} seed "
                f"{spec.seed} from {spec.start_s:g} s along its path ({length:.1f} m, a right turn at a crossing). "
                "RPE: frame-to-frame error, mean. Drift: end-point error over the distance travelled.", "",
                table, note, "", "![one scan](scan_preview.png)", "", "![trajectories](trajectory.png)", "",
                "![position error](position_error.png)", ""]
-    record.path("summary.md").write_text("\n".join(summary))
+    record.write_text("summary.md", "\n".join(summary))
     content = {"experiment": "demo", "sequence": spec.to_dict(), "sequence_folder": str(folder), "rows": rows,
                "metrics": {m: r.metrics for m, r in results.items()}}
     write_json(record.path("results.json"), content)

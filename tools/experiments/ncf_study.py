@@ -304,7 +304,7 @@ def write_ncf_study(result: NcfStudyResult, record: RunRecord) -> None:
                                              "c_tau": result.ctau})
     plots.ncf_calibration(record.path("calibration.png"), result.calibration)
     plots.ncf_ctau(record.path("c_tau.png"), result.ctau, default_c_tau_deg=record.params.get("ncf_max_normal_std_deg"))
-    record.path("summary.md").write_text(ncf_markdown(result, record.params))
+    record.write_text("summary.md", ncf_markdown(result, record.params))
 
 
 def ncf_markdown(result: NcfStudyResult, params: dict) -> str:

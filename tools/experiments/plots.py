@@ -9,8 +9,8 @@ Units are in every axis label.
 
 from __future__ import annotations
 
+import io
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -25,16 +25,16 @@ TARGET_HATCH = {"filtered": "", "raw": "///"}
 LOG_FLOOR_M = 1e-4
 
 
-def _save(fig, path: str | Path, dpi: int = 110) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
-    try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")  # never crop a legend or a label
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+def save_png(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Render ``fig`` to PNG in memory and write it atomically (a reader never sees half a file)."""
+    from simlidar.dataset import atomic_write_bytes
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")  # never crop a legend or a label
+    atomic_write_bytes(path, buf.getvalue())
+    return Path(path)
+
+
 
 
 def _plain_log_ticks(ax, which: str = "both") -> None:
@@ -110,7 +110,7 @@ def trajectory_plot(path, gt: np.ndarray, est: dict, errs: dict | None = None, t
     _end_inset(ax, gt, est)
     note = "" if segment_length_m == 100.0 else f" ({segment_length_m:g} m segments)"
     ax.set_title((title or "trajectory, top view") + note)
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def _end_inset(ax, gt: np.ndarray, est: dict) -> None:
@@ -168,7 +168,7 @@ def trajectory_grid(path, tracks: list, segment_length_m: float = 100.0) -> Path
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=10)
     fig.suptitle("Ground truth against every method, top view" +
                  ("" if segment_length_m == 100.0 else f" ({segment_length_m:g} m segments)"))
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def error_bars(path, rows: list[dict], segment_length_m: float = 100.0) -> Path:
@@ -199,7 +199,7 @@ def error_bars(path, rows: list[dict], segment_length_m: float = 100.0) -> Path:
     ax.grid(True, axis="y", which="both", alpha=0.3)
     ax.legend(title="dot: mu, whiskers: +-sigma", fontsize=9)
     ax.set_title(f"Relative positioning error of {segment_length_m:g} m segments, per sequence and pooled")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def _num(v) -> float:
@@ -220,7 +220,7 @@ def position_error_plot(path, gt: np.ndarray, est: dict, distances_m: np.ndarray
     ax.grid(True, alpha=0.3)
     ax.legend()
     ax.set_title("Position error against ground truth (both start at the identity)")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def scan_preview(path, points: np.ndarray, rings: np.ndarray, n_rings: int, title: str = "",
@@ -240,7 +240,7 @@ def scan_preview(path, points: np.ndarray, rings: np.ndarray, n_rings: int, titl
     ax.legend(loc="upper right")
     fig.colorbar(sc, ax=ax, label="ring (0 = lowest beam)", shrink=0.85)
     ax.set_title(title or "one scan, top view")
-    return _save(fig, path, dpi=130)
+    return save_png(fig, path, dpi=130)
 
 
 # ---------------------------------------------------------------- rejector study (Fig. 3)
@@ -289,7 +289,7 @@ def rejector_boxplot(path, registrations: list[dict], params: dict) -> Path:
     ax.legend(handles=handles, loc="upper left", fontsize=9)
     n = len({r["pair"] for r in registrations})
     ax.set_title(f"Translation error after ICP, {n} scan pairs per level (cf. SALO Fig. 3)")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Path:
@@ -319,7 +319,7 @@ def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Pat
     axes[1].set_xlabel("where the nearest-neighbour candidates are taken")
     axes[0].set_title("Rejectors against the true correspondences: precision = kept true / kept, "
                       "recall = kept true / true", fontsize=10)
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def match_distance_histogram(path, samples: dict, head_on_deg: float = 45.0) -> Path:
@@ -358,7 +358,7 @@ def match_distance_histogram(path, samples: dict, head_on_deg: float = 45.0) -> 
         axes[row, 0].set_ylabel("share of the true matches per bin")
     fig.suptitle("True correspondences at the true pose: match distance against the GCR threshold of the same "
                  "source point")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 # ---------------------------------------------------------------- NCF study
@@ -404,7 +404,7 @@ def ncf_calibration(path, calibration: list[dict], min_count: int = 20) -> Path:
     axes[0, 0].set_ylabel("actual RMS angle to the true normal, deg")
     axes[1, 0].set_ylabel("share with Mahalanobis^2 < 5.99 (0-1)")
     fig.suptitle(f"NCF calibration: points binned by predicted max std (bins with >= {min_count} points)")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def ncf_ctau(path, ctau: list[dict], default_c_tau_deg: float | None = None) -> Path:
@@ -444,7 +444,7 @@ def ncf_ctau(path, ctau: list[dict], default_c_tau_deg: float | None = None) -> 
     axes[1, 0].legend(fontsize=8)
     fig.suptitle("NCF as c_tau varies" + (f" (dotted: the configured {default_c_tau_deg:g} deg)"
                                           if default_c_tau_deg else ""))
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def _noise_colors(noises) -> dict:

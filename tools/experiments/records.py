@@ -178,6 +178,12 @@ class RunRecord:
             self.files.append(relative)
         return p
 
+    def write_text(self, relative: str, text: str) -> Path:
+        """Write a text file of the run folder atomically (see ``path``)."""
+        path = self.path(relative)
+        atomic_write_text(path, text)
+        return path
+
     def finish(self, **extra: Any) -> None:
         t1 = time.time()
         self._info.update(

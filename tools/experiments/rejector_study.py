@@ -459,7 +459,7 @@ def write_rejector_study(result: RejectorStudyResult, record: RunRecord) -> None
     }
     for name, draw in figs.items():
         draw(record.path(name))
-    record.path("summary.md").write_text(rejector_markdown(record.params, result.error_summary, result.pr_summary,
+    record.write_text("summary.md", rejector_markdown(record.params, result.error_summary, result.pr_summary,
                                                            result.finding, len(result.pairs)))
 
 

@@ -390,7 +390,7 @@ def write_table(result: TableResult, record: RunRecord) -> None:
             "path_length_m", "frames", "t_err_pct", "r_err_deg_per_100m", "ate_rmse_m", "ate_aligned_rmse_m",
             "rpe_t_mean_m", "rpe_r_mean_deg", "flagged_degenerate", "extrapolated", "frames_per_second"]
     write_csv(record.path("table.csv"), rows, cols)
-    record.path("table.md").write_text(paper_table_markdown(result))
+    record.write_text("table.md", paper_table_markdown(result))
     write_json(record.path("results.json"), {
         "experiment": "table", "params": record.params,
         "table": rows, "salo_vs_bl": salo_vs_bl(result),
@@ -408,7 +408,7 @@ def write_table(result: TableResult, record: RunRecord) -> None:
                               title=f"{s.spec.name}: top view", segment_length_m=result.params.segment_length_m)
     plots.trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=result.params.segment_length_m)
     plots.error_bars(record.path("errors_per_sequence.png"), rows, result.params.segment_length_m)
-    record.path("summary.md").write_text(table_markdown(result, record.params))
+    record.write_text("summary.md", table_markdown(result, record.params))
 
 
 # ---------------------------------------------------------------- a finished run, read back

@@ -15,6 +15,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from simlidar.dataset import atomic_write_text
+from tools.experiments.plots import save_png
 
 GROUP_COLUMNS = ("scene", "sensor", "noise_std_m", "variant")
 SUMMARY_METRICS = ("t_err_pct", "r_err_deg_per_100m", "t100_mean_m", "ate_aligned_rmse_m", "rpe_t_rmse_m",
@@ -134,12 +135,10 @@ def plot_scene(rows: list[dict], scene: str, path: Path) -> Path:
             ax.text(0.5, 0.5, "no successful runs", ha="center", va="center", transform=ax.transAxes)
     fig.suptitle(f"{scene}: error against range noise (mean over seeds, bars: min..max, dots: seeds)")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    try:
+        return save_png(fig, path)
+    finally:
+        plt.close(fig)
 
 
 def write_report(rows: list[dict], out_dir: str | Path) -> dict[str, Path]:
