@@ -242,6 +242,8 @@ def test_cli_bad_input(tmp_path, capsys):
         (["demo", "--frames", "1"], "argument --frames: must be at least 2, got 1"),
         (["experiment", "rejectors", "--pairs", "zero"], "argument --pairs: not a whole number: 'zero'"),
         (["sweep", "spec.yaml", "--workers", "-1"], "argument --workers: must be at least 0, got -1"),
+        (["regress", "--timeout", "0"], "argument --timeout: must be above 0, got 0"),
+        (["export", "seq", "--format", "tum", "--epoch", "nan"], "argument --epoch: must be finite"),
     ],
 )
 def test_cli_refuses_bad_numbers_before_any_work(tmp_path, capsys, argv, words):
@@ -250,6 +252,12 @@ def test_cli_refuses_bad_numbers_before_any_work(tmp_path, capsys, argv, words):
         salo([*argv, "--out", str(out)])
     assert exit_.value.code == 2 and words in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_cli_refuses_a_set_value_that_is_not_yaml(tmp_path, capsys):
+    code = salo(["odometry", str(tmp_path / "seq"), "--set", "voxel_size_m=[", "--out", str(tmp_path / "p.txt")])
+    assert code == 2 and "--set 'voxel_size_m=[': not a YAML value" in capsys.readouterr().err
+    assert not (tmp_path / "p.txt").exists()
 
 
 def test_check_clear_uses_each_frame(tmp_path):

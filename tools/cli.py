@@ -201,7 +201,10 @@ def parse_assignments(pairs: list[str]) -> dict:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise CommandError(f"--set {pair!r}: expected KEY=VALUE")
-        out[key.strip()] = yaml.safe_load(value)
+        try:
+            out[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:
+            raise CommandError(f"--set {pair!r}: not a YAML value ({exc.problem or exc})") from None
     return out
 
 
@@ -278,9 +281,11 @@ def cmd_sensors(args) -> int:
 
 # ---------------------------------------------------------------- demo
 def _add_demo(sub) -> None:
+    from tools.demo import DEMO_FRAMES
+
     p = sub.add_parser("demo", help="the README's demo: simulate, run the odometry, plot")
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
-    p.add_argument("--frames", type=whole_number(2), default=150,
+    p.add_argument("--frames", type=whole_number(2), default=DEMO_FRAMES,
                    help="frames to simulate (default 150: >= 100 m of path)")
     p.set_defaults(func=cmd_demo)
 

@@ -276,7 +276,10 @@ def cmd_ncf(args) -> int:
                             max_points_per_scan=args.max_points or (1500 if args.quick else None), seed=args.seed,
                             config_overrides=_config_overrides(args.config_set))
     record = RunRecord(args.out, "ncf", params.to_dict(), _command_line()).start()
-    result = run_ncf_study(params, args.cache, progress=args.progress)
+    try:
+        result = run_ncf_study(params, args.cache, progress=args.progress)
+    except ValueError as exc:
+        raise _error(str(exc)) from None
     write_ncf_study(result, record)
     for r in result.overview:
         print(f"{r['model']:9s} noise {1000 * r['noise_std_m']:4g} mm: {r['points']} points, median error "

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tools.argtypes import real_number
+
 
 def add_commands(subparsers) -> None:
     """Register ``export`` on an argparse sub-parsers object."""
@@ -30,7 +32,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--sensor", help="preset or YAML overriding the sequence's sensor.yaml")
     p.add_argument("--topic", help="PointCloud2 topic when SEQUENCE is a bag with several")
     p.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default mcap)")
-    p.add_argument("--epoch", type=float, default=DEFAULT_EPOCH_S, metavar="SECONDS",
+    p.add_argument("--epoch", type=real_number(0.0), default=DEFAULT_EPOCH_S, metavar="SECONDS",
                    help=f"ROS time of the sequence's t = 0, s since 1970 (default {DEFAULT_EPOCH_S}, 2020-01-01)")
     p.add_argument("--no-truth", dest="truth", action="store_false",
                    help="leave out the simulator's per-point ground-truth fields (bag, ply, pcd)")

@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from tools.argtypes import whole_number
+from tools.argtypes import real_number, whole_number
 
 
 def _command_error(message: str) -> Exception:
@@ -47,7 +47,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--rerun", action="store_true", help="redo every run, finished ones too (sequences are reused)")
     p.add_argument("--keep-failed", action="store_true", help="do not redo runs that failed last time")
     p.add_argument("--dry-run", action="store_true", help="print the plan and stop")
-    p.add_argument("--timeout", type=float, metavar="S", help="time limit of an external odometry command, s")
+    p.add_argument("--timeout", type=real_number(0.0, above=True), metavar="S",
+                   help="time limit of an external odometry command, s")
     p.set_defaults(func=cmd_sweep)
 
     p = subparsers.add_parser(
@@ -71,7 +72,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--keep-sequences", action="store_true",
                    help="keep the simulated sequences in --out and reuse them next time (faster; stale if "
                         "the simulator changes)")
-    p.add_argument("--timeout", type=float, default=3600.0, metavar="S",
+    p.add_argument("--timeout", type=real_number(0.0, above=True), default=3600.0, metavar="S",
                    help="time limit of --odometry-command per sequence, s (default 3600)")
     _add_executor_args(p)
     p.set_defaults(func=cmd_regress)

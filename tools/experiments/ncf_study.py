@@ -161,7 +161,7 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
     sigma = sensor.range_noise_std_m
     for model in models:
         noise = RangeNoise(range_noise_std_m=sigma) if model == "range" else IsotropicNoise(point_noise_std_m=sigma)
-        nc = normal_covariance(P, noise, pca=est)
+        nc = normal_covariance(P, noise, pca=est, noise_free_gaps=config.ncf_noise_free_gaps)  # as the odometry
         lam = nc.eigenvalues_rad2
         a = np.einsum("mj,mj->m", e, nc.eigenvectors[:, :, 1])
         b = np.einsum("mj,mj->m", e, nc.eigenvectors[:, :, 2])
