@@ -123,6 +123,9 @@ class Odometry:
         self._last_stamp: float | None = None
         self._last_period: float | None = None
         self._use_gcr = False
+        # The rejection chains, built once: with GCR, and without (the first registration)
+        self._chain_with_gcr = rejectors_for(config)
+        self._chain_without_gcr = rejectors_for(config.replace(gcr=False))
         self._previous_motion = np.eye(4)  # the motion the stored target was de-skewed with
         self._target_pose = np.eye(4)  # pose of the target scan (T_first_lidar) and its frame index
         self._target_frame = 0
@@ -232,10 +235,13 @@ class Odometry:
                 # The GCR thresholds scale with range and incidence, which a re-de-skew by a
                 # few centimetres does not change: they are reused.
                 source = Source(scan.points, scan.normals, source.gcr_threshold_m)
-                result = register(source, self._target, result.T_target_source, cfg, self._rejectors())
-                for stage, spent in result.seconds.items():  # stage times and iterations cover every registration
+                refined = register(source, self._target, result.T_target_source, cfg, self._rejectors())
+                for stage, spent in refined.seconds.items():  # stage times and iterations cover every registration
                     icp_seconds[stage] += spent
-                icp_iterations += result.iterations
+                icp_iterations += refined.iterations
+                if refined.singular:  # keep the last good estimate: the frame is not extrapolated
+                    break
+                result = refined
             self._record(diag, result)
             diag.iterations = icp_iterations
             seconds.update(icp_seconds)
@@ -298,7 +304,7 @@ class Odometry:
         return se3.exp(se3.log(self._motion) * (period / self._last_period))
 
     def _rejectors(self):
-        return rejectors_for(self.config if self._use_gcr else self.config.replace(gcr=False))
+        return self._chain_with_gcr if self._use_gcr else self._chain_without_gcr
 
     def _source(self, scan: FilteredScan) -> Source:
         threshold = None

@@ -21,23 +21,18 @@ from odometry.config import variant
 from odometry.metrics import evaluate_trajectory
 from odometry.pipeline import Odometry
 from simlidar.dataset import open_sequence
+from tools.experiments.peer import kiss_icp_available, run_kiss_icp
 
 STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject", "estimate")
 
 
 def sequence(scene: str, frames: int, sensor: str, out: Path):
+    """The benchmark's sequence (seed 0, from t = 5 s, the sensor's own noise), cached by its parameters."""
     from simlidar.sensor import load_sensor
-    from simlidar.simulate import simulate_sequence
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.experiments.suite import SequenceSpec, ensure_sequence
 
-    folder = out / f"{scene}-{sensor}-{frames}"
-    if not (folder / "manifest.json").exists():
-        world, traj, info = build_world_and_trajectory(scene, 0, {})
-        t = time.perf_counter()
-        simulate_sequence(world, traj, load_sensor(sensor), folder, frames=frames, seed=0, t_start=5.0,
-                          info=info, force=True)
-        print(f"simulated {frames} frames of {scene} in {time.perf_counter() - t:.1f} s -> {folder}")
-    return open_sequence(folder)
+    spec = SequenceSpec(scene, 0, frames, sensor, noise_std_m=load_sensor(sensor).range_noise_std_m, start_s=5.0)
+    return open_sequence(ensure_sequence(spec, out, progress=True))
 
 
 def peak_memory_mb(seq, name: str, frames: int) -> float:
@@ -50,27 +45,6 @@ def peak_memory_mb(seq, name: str, frames: int) -> float:
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return peak / 1e6
-
-
-def kiss_icp_run(seq) -> tuple[float, np.ndarray] | None:
-    try:
-        from kiss_icp.config import KISSConfig
-        from kiss_icp.kiss_icp import KissICP
-    except ImportError:
-        return None
-    cfg = KISSConfig()
-    cfg.data.max_range = 100.0
-    cfg.mapping.voxel_size = cfg.data.max_range / 100.0  # what its pipeline derives when unset
-    cfg.data.deskew = True
-    odo = KissICP(cfg)
-    frames = [seq[k] for k in range(len(seq))]
-    t = time.perf_counter()
-    poses = []
-    for f in frames:
-        stamps = f.time_s / seq.sensor.sweep_period_s  # normalised to [0, 1) like a driver's
-        odo.register_frame(f.points, stamps)
-        poses.append(odo.last_pose.copy())
-    return time.perf_counter() - t, np.stack(poses)
 
 
 def main() -> None:
@@ -101,14 +75,15 @@ def main() -> None:
               + " ".join(f"{per_stage[s]:9.1f}" for s in STAGES) + f" {mem:8.0f} {m.t_err_pct:8.3f}")
     print("\n(stage columns: ms per frame; de-skew includes the refinements; peak MB is the traced "
           f"allocation peak over {args.memory_frames} frames)")
-    kiss = kiss_icp_run(seq)
-    if kiss is None:
+    if not kiss_icp_available():
         print("KISS-ICP: not installed (pip install kiss-icp) - no peer timing")
-    else:
-        dt, poses = kiss
-        m = evaluate_trajectory(seq.poses, np.linalg.inv(poses[0]) @ poses)
-        print(f"KISS-ICP {len(frames) / dt:8.1f} frames/s, t_err {m.t_err_pct:.3f} %; "
-              f"salo time / KISS-ICP time = {times['salo'] / dt:.2f}")
+        return
+    # The table's runner: same range limits, sweep-start poses (its own are at the sweep's end).
+    cfg = variant("salo")
+    kiss = run_kiss_icp(seq, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
+    m = evaluate_trajectory(seq.poses, kiss.poses)
+    print(f"KISS-ICP {kiss.frames_per_second:8.1f} frames/s, t_err {m.t_err_pct:.3f} %; "
+          f"salo time / KISS-ICP time = {times['salo'] / kiss.seconds:.2f}")
 
 
 if __name__ == "__main__":
