@@ -451,8 +451,9 @@ def open_sequence(
         (``simlidar.bag.RosbagSequence``, which behaves like a ``Sequence``).
     """
     path = Path(path)
-    if path.suffix in (".mcap", ".db3") or (path / "metadata.yaml").is_file():
-        from .bag import open_bag  # imported here so that rosbags stays an optional dependency
+    from .bag import is_bag, open_bag  # bag.py imports rosbags only when a bag is opened
+
+    if is_bag(path):
 
         return open_bag(path, load_sensor(sensor) if sensor is not None else None, poses, topic=topic)
     if not path.is_dir():

@@ -37,6 +37,13 @@ def save_png(fig, path: str | Path, dpi: int = 110) -> Path:
 
 
 
+def _level(level: dict) -> str:
+    """The rejector study's label of a perturbation level (its results are keyed by it)."""
+    from .rejector_study import level_label
+
+    return level_label((level["l_r_deg"], level["l_t_m"]))
+
+
 def _plain_log_ticks(ax, which: str = "both") -> None:
     """Log-axis tick labels as plain numbers (0.5, 1, 2, 5) rather than powers of ten."""
     from matplotlib.ticker import FuncFormatter, LogLocator
@@ -248,7 +255,7 @@ def rejector_boxplot(path, registrations: list[dict], params: dict) -> Path:
     """Translation error after ICP per noise level: a box per (rejector, target), and the initial error."""
     from matplotlib.patches import Patch
 
-    levels = [f"{lv['l_r_deg']:g} deg / {lv['l_t_m']:g} m" for lv in params["levels"]]
+    levels = [_level(lv) for lv in params["levels"]]
     targets = params["targets"]
     groups = [(rej, t) for t in targets for rej in ("distance", "gcr")]
     fig = _figure(figsize=(max(8.0, 2.3 * len(levels) + 2), 5.4))
@@ -294,7 +301,7 @@ def rejector_boxplot(path, registrations: list[dict], params: dict) -> Path:
 
 def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Path:
     """Precision and recall of the distance rejector and GCR against the true correspondences."""
-    cats = ["true pose"] + [f"{lv['l_r_deg']:g} deg / {lv['l_t_m']:g} m" for lv in params["levels"]]
+    cats = ["true pose"] + [_level(lv) for lv in params["levels"]]
     fig = _figure(figsize=(max(8.0, 1.5 * len(cats) + 3), 7.0))
     axes = fig.subplots(2, 1, sharex=True)
     styles = {"filtered": "-", "raw": "--"}
@@ -315,7 +322,7 @@ def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Pat
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=9, ncol=2, loc="lower left")
     axes[1].set_xticks(range(len(cats)), ["at the\ntrue pose"] +
-                       [f"initial guess\n{lv['l_r_deg']:g} deg / {lv['l_t_m']:g} m" for lv in params["levels"]])
+                       ["initial guess\n" + _level(lv) for lv in params["levels"]])
     axes[1].set_xlabel("where the nearest-neighbour candidates are taken")
     axes[0].set_title("Rejectors against the true correspondences: precision = kept true / kept, "
                       "recall = kept true / true", fontsize=10)
