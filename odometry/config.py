@@ -25,7 +25,7 @@ import yaml
 from simlidar.yaml_file import read_yaml
 
 NOISE_MODELS = ("range", "isotropic")
-MATCH_TARGETS = ("filtered", "raw")
+MATCH_TARGETS = ("filtered", "raw", "map")
 GCR_FORMULAS = ("beam", "paper")
 
 
@@ -63,8 +63,12 @@ class OdometryConfig:
         kitti_vertical_correction_deg: rotate KITTI HDL-64E points about the axis
             perpendicular to their beam by this much (0 = off; 0.205 for KITTI).
     Matching and rejection:
-        match_target: match against the previous "filtered" scan (Alg. 1) or its
-            "raw" (de-skewed) points.
+        match_target: match against the previous "filtered" scan (Alg. 1), its
+            "raw" (de-skewed) points, or a local "map" of recent scans (``odometry.local_map``).
+        map_voxel_size_m, map_points_per_voxel: the map's voxels and how many points
+            each holds at most.
+        map_max_distance_m: map points farther than this from the sensor are dropped
+            (None: ``max_range_m``).
         max_correspondence_distance_m: the distance rejector.
         trim_fraction: drop this fraction of the largest distances (paper: 0.2).
         gcr: apply the geometric correspondence rejector.
@@ -85,6 +89,13 @@ class OdometryConfig:
             10 Hz is 0.1 m) is a failed registration: flagged, pose extrapolated.
         degenerate_eigenvalue: flag a frame whose smallest translational
             eigenvalue of the per-match information (H / N) is below this.
+    Degeneracy (``odometry.constraints``):
+        min_constraint_eigenvalue: a direction of motion whose scaled information per
+            match is below this is weakly constrained: the ICP leaves it at the motion
+            prior (solution remapping) and the NCF may not push a direction below it
+            (0 = neither).
+        rotation_scale_m: the length L that makes rotation commensurate with
+            translation in those eigenvalues (rows ``[n, (p x n) / L]``).
     """
 
     name: str = "salo"
@@ -103,6 +114,9 @@ class OdometryConfig:
     deskew_refinements: int = 2
     kitti_vertical_correction_deg: float = 0.0
     match_target: str = "filtered"
+    map_voxel_size_m: float = 1.0
+    map_points_per_voxel: int = 20
+    map_max_distance_m: float | None = None
     max_correspondence_distance_m: float = 1.0
     trim_fraction: float = 0.2
     gcr: bool = True
@@ -116,6 +130,8 @@ class OdometryConfig:
     max_prediction_error_m: float = 1.0
     max_prediction_error_deg: float = 10.0
     degenerate_eigenvalue: float = 0.01
+    min_constraint_eigenvalue: float = 0.0
+    rotation_scale_m: float = 10.0
 
     def __post_init__(self) -> None:
         def fail(key: str, problem: str) -> None:
@@ -123,24 +139,27 @@ class OdometryConfig:
 
         positive = ("voxel_size_m", "ncf_point_noise_std_m", "ncf_max_normal_std_deg", "max_range_m",
                     "max_correspondence_distance_m", "abs_translation_tol_m", "abs_rotation_tol_deg",
-                    "max_prediction_error_m", "max_prediction_error_deg")
+                    "max_prediction_error_m", "max_prediction_error_deg", "map_voxel_size_m", "rotation_scale_m")
         for key in positive:
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0:
                 fail(key, f"must be a number > 0, got {v!r}")
         for key in ("max_curvature", "min_range_m", "rel_tolerance", "degenerate_eigenvalue", "gcr_noise_floor_m",
-                    "kitti_vertical_correction_deg"):
+                    "kitti_vertical_correction_deg", "min_constraint_eigenvalue"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int | float) or (key != "kitti_vertical_correction_deg"
                                                                           and v < 0):
                 fail(key, f"must be a non-negative number, got {v!r}")
+        if self.map_max_distance_m is not None and not self.map_max_distance_m > 0:
+            fail("map_max_distance_m", f"must be > 0 or null, got {self.map_max_distance_m!r}")
         if self.ncf_range_noise_std_m is not None and not self.ncf_range_noise_std_m > 0:
             fail("ncf_range_noise_std_m", f"must be > 0 or null, got {self.ncf_range_noise_std_m!r}")
         if self.min_range_m >= self.max_range_m:
             fail("min_range_m", f"must be < max_range_m ({self.min_range_m} >= {self.max_range_m})")
         if not 0 <= self.trim_fraction < 1:
             fail("trim_fraction", f"must be in [0, 1), got {self.trim_fraction}")
-        for key, lo in (("normal_neighbours", 3), ("max_iterations", 1), ("min_points", 6), ("deskew_refinements", 0)):
+        for key, lo in (("normal_neighbours", 3), ("max_iterations", 1), ("min_points", 6), ("deskew_refinements", 0),
+                        ("map_points_per_voxel", 1)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 fail(key, f"must be an integer >= {lo}, got {v!r}")

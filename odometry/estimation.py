@@ -6,6 +6,8 @@ under a small motion ``(rho, omega)`` (translation, rotation vector) as
 ``r + n . rho + (p x n) . omega``. Stacking ``J_i = [n_i^T, (p_i x n_i)^T]``
 gives the 6 x 6 normal equations ``H x = -J^T r`` with ``H = J^T J``; the
 increment is ``exp(x)`` (``simlidar.se3`` ordering), applied on the left.
+Directions the matches constrain too weakly can be left at the prior
+(``odometry.constraints.remapped_step``).
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ import numpy as np
 
 from simlidar import se3
 
+from .constraints import remapped_step
+
 
 @dataclass
 class PlaneStep:
@@ -25,6 +29,7 @@ class PlaneStep:
     xi: (6,) its twist (rho m, omega rad).
     H: (6, 6) information matrix J^T J of this step's matches.
     rank: numerical rank of H (6 unless the geometry leaves a motion unconstrained).
+    remapped: directions left at the prior because they were weakly constrained.
     rms_m: RMS point-to-plane residual before the step.
     """
 
@@ -33,20 +38,23 @@ class PlaneStep:
     H: np.ndarray
     rank: int
     rms_m: float
+    remapped: int = 0
 
 
 def point_to_plane_step(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray,
-                        rcond: float = 1e-10) -> PlaneStep:
+                        rcond: float = 1e-10, min_eigenvalue: float = 0.0,
+                        rotation_scale_m: float = 10.0) -> PlaneStep:
     """Solve the linearised point-to-plane problem for (N, 3) matched points and normals.
 
     A rank-deficient system (fewer than 6 constrained directions) is solved in the
-    least-squares minimum-norm sense, leaving unconstrained directions unchanged.
+    least-squares minimum-norm sense, leaving unconstrained directions unchanged;
+    so are directions whose scaled information per match is below ``min_eigenvalue``
+    (``odometry.constraints``; 0 = only the numerically unconstrained ones).
     """
     r = np.einsum("ij,ij->i", target_normals, source - target)
     J = np.hstack([target_normals, np.cross(source, target_normals)])
     H = J.T @ J
     g = J.T @ r
-    w, V = np.linalg.eigh(H)
-    good = w > rcond * max(w[-1], 1e-300)
-    xi = -(V[:, good] @ ((V[:, good].T @ g) / w[good]))
-    return PlaneStep(se3.exp(xi), xi, H, int(good.sum()), float(np.sqrt(np.mean(r**2))) if len(r) else 0.0)
+    solve = remapped_step(H, g, len(r), rotation_scale_m, min_eigenvalue, rcond)
+    return PlaneStep(se3.exp(solve.xi), solve.xi, H, solve.rank,
+                     float(np.sqrt(np.mean(r**2))) if len(r) else 0.0, solve.remapped)

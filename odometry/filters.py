@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .config import OdometryConfig
+from .constraints import restore_constraints
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import estimate_normals
 
@@ -73,7 +74,10 @@ class FilteredScan:
         (NCF's prediction; nan when the NCF did not run).
     raw_points: (N, 3) the de-skewed raw points the normals were estimated from.
     raw_tree: cKDTree over ``raw_points``.
-    counts: points after each stage: raw, voxels, ncf, curvature.
+    centroids: (V, 3) every voxel centroid, before the filters (what a map keeps).
+    centroid_times_s: (V,) their mean firing times, s, or None.
+    counts: points after each stage: raw, voxels, ncf, curvature, and "restored"
+        (NCF-rejected points kept for a direction they alone constrain).
     seconds: time spent per stage.
     """
 
@@ -84,6 +88,8 @@ class FilteredScan:
     normal_std_rad: np.ndarray
     raw_points: np.ndarray
     raw_tree: cKDTree
+    centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    centroid_times_s: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
     seconds: dict = field(default_factory=dict)
 
@@ -128,7 +134,7 @@ def filter_scan(
     k = min(config.normal_neighbours, len(raw_points))
     if k < 3:
         empty = np.zeros((0, 3))
-        return FilteredScan(empty, empty, None, None, np.zeros(0), raw_points, tree,
+        return FilteredScan(empty, empty, None, None, np.zeros(0), raw_points, tree, centroids, centroid_times,
                             {**counts, "ncf": 0, "curvature": 0}, seconds)
     est = estimate_normals(raw_points, k=k, query_points=centroids, tree=tree)
     seconds["normals"] = time.perf_counter() - t
@@ -145,7 +151,14 @@ def filter_scan(
         )
         normal_std = cov.max_std_rad
     counts["ncf"] = int(keep.sum())
-    keep &= curvature_keep(est.curvature, config.max_curvature)
+    flat = curvature_keep(est.curvature, config.max_curvature)
+    keep &= flat
+    if config.ncf and config.min_constraint_eigenvalue > 0:
+        # the NCF may not take away the last evidence of a direction of motion
+        guarded = restore_constraints(centroids, est.normals, flat, keep, config.min_constraint_eigenvalue,
+                                      config.rotation_scale_m)
+        counts["restored"] = int((guarded & ~keep).sum())
+        keep = guarded
     counts["curvature"] = int(keep.sum())
     seconds["ncf_curvature"] = time.perf_counter() - t
 
@@ -158,6 +171,8 @@ def filter_scan(
         normal_std_rad=normal_std[keep],
         raw_points=raw_points,
         raw_tree=tree,
+        centroids=centroids,
+        centroid_times_s=centroid_times,
         counts=counts,
         seconds=seconds,
     )

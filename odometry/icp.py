@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 from simlidar import se3
 
 from .config import OdometryConfig
+from .constraints import weakest_translation
 from .estimation import point_to_plane_step
 from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
 
@@ -39,25 +40,28 @@ class Source:
 class Target:
     """The scan registered against: points, a k-d tree over them, and their normals.
 
-    points: (N, 3) m. normals: (N, 3) unit, or rows of nan filled on demand by
-    ``estimate_normals(indices) -> (len(indices), 3)`` (a raw target, where
-    computing every normal would be wasted work).
+    points: (N, 3) m. normals: (N, 3) unit, or filled on demand by
+    ``estimate_normals(indices) -> (len(indices), 3)`` (a raw scan or a map, where
+    computing every normal would be wasted work); a nan normal means "no plane
+    here" and the ICP drops matches to it.
     """
 
     points: np.ndarray
     tree: cKDTree
     normals: np.ndarray
     estimate_normals: Callable[[np.ndarray], np.ndarray] | None = None
+    known: np.ndarray | None = None  # (N,) bool: rows whose normal has been estimated (shared with a map's cache)
 
     def normals_at(self, index: np.ndarray) -> np.ndarray:
-        n = self.normals[index]
         if self.estimate_normals is not None:
-            missing = np.isnan(n[:, 0])
+            if self.known is None:
+                self.known = np.zeros(len(self.points), dtype=bool)
+            missing = ~self.known[index]
             if missing.any():
                 rows = np.unique(index[missing])
                 self.normals[rows] = self.estimate_normals(rows)
-                n = self.normals[index]
-        return n
+                self.known[rows] = True
+        return self.normals[index]
 
 
 @dataclass
@@ -71,8 +75,11 @@ class RegistrationResult:
     rms_m: point-to-plane RMS residual at the last step. H: (6, 6) information of
     the last step's matches. info_eigenvalues: (6,) ascending eigenvalues of H / N;
     translation_eigenvalues: (3,) of its translation block. degenerate: the
-    smallest translational eigenvalue is below the config's threshold. singular:
-    too few matches or a rank-deficient system; the result is then the initial guess.
+    smallest translational eigenvalue is below the config's threshold.
+    weakest_direction: (3,) unit eigenvector of that smallest eigenvalue (sign: its
+    largest component positive). remapped: directions the last step left at the
+    prior (``odometry.constraints``). singular: too few matches or a rank-deficient
+    system; the result is then the initial guess.
     """
 
     T_target_source: np.ndarray
@@ -85,6 +92,8 @@ class RegistrationResult:
     info_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
     translation_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     degenerate: bool = False
+    weakest_direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    remapped: int = 0
     singular: bool = False
     seconds: dict = field(default_factory=dict)
 
@@ -121,20 +130,38 @@ def register(
     T_init: np.ndarray,
     config: OdometryConfig,
     rejectors: Sequence[Rejector] | None = None,
+    T_target_previous: np.ndarray | None = None,
 ) -> RegistrationResult:
-    """Alg. 1's loop: estimate ``T_target_source`` starting from ``T_init`` (4, 4)."""
+    """Alg. 1's loop: estimate ``T_target_source`` starting from ``T_init`` (4, 4).
+
+    ``T_target_previous`` (4, 4) is the previous frame's pose in the target frame
+    (default: the identity, the target is the previous scan): the relative
+    termination threshold is a fraction of the motion from there.
+
+    Matches whose target has no plane (a nan normal: a map point on a line or a
+    corner) are dropped before the rejectors. The steps are linearised about the
+    sensor's initial position in the target frame, not the target frame's origin
+    (a map's origin can be hundreds of metres away, where a small rotation is a
+    large translation); with ``min_constraint_eigenvalue`` the directions the
+    matches constrain too weakly keep ``T_init``'s value (``odometry.constraints``).
+    """
     rejectors = rejectors_for(config) if rejectors is None else rejectors
     T = np.array(T_init, dtype=float)
+    centre = T[:3, 3].copy()
     res = RegistrationResult(T_target_source=T.copy())
     seconds = {"match": 0.0, "reject": 0.0, "estimate": 0.0}
     # The distance rejector's bound also limits the k-d tree search.
     bound = config.max_correspondence_distance_m
+    planes_optional = target.estimate_normals is not None
     for it in range(1, config.max_iterations + 1):
         t0 = time.perf_counter()
         moved = source.points @ T[:3, :3].T + T[:3, 3]
         m = match(moved, target, bound)
         t1 = time.perf_counter()
         counts = {"candidates": len(source.points)}
+        if planes_optional:
+            m = m.select(np.isfinite(target.normals_at(m.target_index)[:, 0]))
+            counts["plane"] = len(m)
         for reject in rejectors:
             m = m.select(reject(m, source))
             counts[reject.__name__] = len(m)
@@ -146,15 +173,19 @@ def register(
         if len(m) < config.min_points:
             res.singular = True
             break
-        step = point_to_plane_step(moved[m.source_index], target.points[m.target_index],
-                                   target.normals_at(m.target_index))
+        step = point_to_plane_step(moved[m.source_index] - centre, target.points[m.target_index] - centre,
+                                   target.normals_at(m.target_index), min_eigenvalue=config.min_constraint_eigenvalue,
+                                   rotation_scale_m=config.rotation_scale_m)
         seconds["estimate"] += time.perf_counter() - t2
-        res.iterations, res.rms_m, res.H = it, step.rms_m, step.H
+        res.iterations, res.rms_m, res.H, res.remapped = it, step.rms_m, step.H, step.remapped
         if step.rank < 6:
             res.singular = True
             break
-        T = step.increment @ T
-        if converged(step.xi, T, config):
+        # exp(xi) acts about the centre: T <- C exp(xi) C^-1 T, C the translation by the centre
+        inc = step.increment
+        T = inc @ T
+        T[:3, 3] += centre - inc[:3, :3] @ centre
+        if converged(step.xi, T if T_target_previous is None else se3.inverse(T_target_previous) @ T, config):
             res.converged = True
             break
     res.seconds = seconds
@@ -164,6 +195,6 @@ def register(
         res.T_target_source = T
         n = max(res.n_matches, 1)
         res.info_eigenvalues = np.linalg.eigvalsh(res.H / n)
-        res.translation_eigenvalues = np.linalg.eigvalsh(res.H[:3, :3] / n)
+        res.translation_eigenvalues, res.weakest_direction = weakest_translation(res.H, n)
         res.degenerate = bool(res.translation_eigenvalues[0] < config.degenerate_eigenvalue)
     return res

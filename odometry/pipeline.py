@@ -1,13 +1,14 @@
-"""Scan-to-scan odometry over a sequence: the variants BL, NCF and SALO of the paper's table.
+"""Odometry over a sequence: the variants BL, NCF and SALO of the paper's table, scan-to-scan or scan-to-map.
 
-``Odometry.register`` reads as the paper's steps::
+``Odometry.register`` reads as the paper's steps (each a function of this module,
+``odometry.filters`` or ``odometry.icp``; the class holds only ``OdometryState``)::
 
     clean      drop non-finite points and points outside the range limits
     de-skew    undo motion distortion with the constant-velocity motion (times known)
     filter     voxel grid -> kNN normals in the raw scan -> NCF -> curvature
     init       linear extrapolation: the last relative motion
-    align      ICP: match in the previous scan, reject, point-to-plane, until converged
-    update     pose_i = pose_{i-1} T_{i-1,i}; remember the motion and this scan
+    align      ICP: match in the previous scan or the local map, reject, point-to-plane, until converged
+    update     pose_i = pose_{i-1} T_{i-1,i}; remember the motion; this scan becomes the target / joins the map
 """
 
 from __future__ import annotations
@@ -31,8 +32,16 @@ from .deskew import deskew, redeskew
 from .filters import FilteredScan, filter_scan
 from .gcr import correct_kitti_vertical_angle, gcr_threshold_m, ring_of_points
 from .icp import RegistrationResult, Source, Target, register, rejectors_for
+from .local_map import LocalMap
+from .normals import estimate_normals
 
 log = logging.getLogger(__name__)
+
+
+# The stages timed in the diagnostics, in the order a frame passes them.
+STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject", "estimate", "map")
+# The frame period when neither time stamps nor a sensor give one (10 Hz, the common spin rate), s.
+DEFAULT_FRAME_PERIOD_S = 0.1
 
 
 class OdometryError(ValueError):
@@ -59,6 +68,8 @@ class FrameDiagnostics:
     rms_m: float = float("nan")
     info_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
     translation_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    weakest_direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    remapped: int = 0
     degenerate: bool = False
     singular: bool = False
     too_few_points: bool = False
@@ -75,9 +86,10 @@ class FrameDiagnostics:
 CSV_COLUMNS = (
     ["frame", "points_raw", "points_nonfinite", "points_in_range", "voxels", "after_ncf", "after_curvature",
      "candidates", "after_distance", "after_gcr", "after_trimmed", "iterations", "converged", "rms_m"]
-    + [f"eig{k}" for k in range(6)] + ["t_eig0", "t_eig1", "t_eig2"]
+    + [f"eig{k}" for k in range(6)] + ["t_eig0", "t_eig1", "t_eig2", "weak_x", "weak_y", "weak_z", "remapped",
+                                        "restored"]
     + ["degenerate", "singular", "too_few_points", "implausible", "extrapolated", "deskewed"]
-    + ["s_deskew", "s_voxel", "s_normals", "s_ncf_curvature", "s_match", "s_reject", "s_estimate", "s_total"]
+    + [f"s_{stage}" for stage in STAGES] + ["s_total"]
 )
 
 
@@ -88,23 +100,139 @@ def diagnostics_row(d: FrameDiagnostics) -> list:
          fc.get("curvature", ""), m.get("candidates", ""), m.get("distance", ""), m.get("gcr", ""),
          m.get("trimmed", ""), d.iterations, int(d.converged), f"{d.rms_m:.6g}"]
         + [f"{v:.6g}" for v in d.info_eigenvalues] + [f"{v:.6g}" for v in d.translation_eigenvalues]
+        + [f"{v:.4f}" for v in d.weakest_direction] + [d.remapped, fc.get("restored", "")]
         + [int(d.degenerate), int(d.singular), int(d.too_few_points), int(d.implausible), int(d.extrapolated),
            int(d.deskewed)]
-        + [f"{s.get(k, 0.0):.6f}" for k in ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject",
-                                           "estimate", "total")]
+        + [f"{s.get(k, 0.0):.6f}" for k in (*STAGES, "total")]
     )
 
 
+@dataclass
+class CleanScan:
+    """A scan with the unusable points removed (``clean_scan``).
+
+    points: (N, 3) finite points within the range limits, sensor frame, m.
+    times_s: (N,) per-point time since the sweep start, s, or None.
+    rings: (N,) int ring per point, or None.
+    """
+
+    points: np.ndarray
+    times_s: np.ndarray | None
+    rings: np.ndarray | None
+
+
+def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray | None, config: OdometryConfig,
+               diag: FrameDiagnostics | None = None) -> CleanScan:
+    """Drop non-finite points and those outside ``[min_range_m, max_range_m]``; KITTI's vertical-angle fix.
+
+    points: (N, 3) as measured, m; times_s, rings: (N,) or None. Counts go into ``diag``.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    finite = np.all(np.isfinite(points), axis=1)
+    safe = np.where(finite[:, None], points, 0.0)
+    r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
+    keep = finite & (r >= config.min_range_m) & (r <= config.max_range_m)
+    out = CleanScan(points[keep], None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep],
+                    None if rings is None else np.asarray(rings)[keep])
+    if config.kitti_vertical_correction_deg:
+        out.points = correct_kitti_vertical_angle(out.points, config.kitti_vertical_correction_deg)
+    if diag is not None:
+        diag.points_raw, diag.points_nonfinite = len(points), int((~finite).sum())
+        diag.points_in_range = len(out.points)
+    return out
+
+
+def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel | None, with_gcr: bool) -> Source:
+    """The registration's source: the filtered points and normals, with GCR thresholds when used."""
+    threshold = None
+    if with_gcr:
+        threshold = gcr_threshold_m(scan.points, scan.normals, scan.rings, sensor, config.gcr_formula,
+                                    config.gcr_noise_floor_m)
+        threshold[np.isnan(threshold)] = np.inf  # no neighbour beam to bound the match: keep it
+    return Source(scan.points, scan.normals, threshold)
+
+
+def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
+    """A scan as the target of scan-to-scan registration (its own frame).
+
+    ``match_target: filtered``: the filtered points and their normals (Alg. 1);
+    ``raw``: every de-skewed raw point, normals estimated where matched.
+    """
+    if config.match_target == "filtered":
+        return Target(scan.points, cKDTree(scan.points), scan.normals)
+    raw, tree, k = scan.raw_points, scan.raw_tree, config.normal_neighbours
+
+    def normals_of(rows: np.ndarray) -> np.ndarray:
+        return estimate_normals(raw, k=k, query_points=raw[rows], tree=tree).normals
+
+    return Target(raw, tree, np.full(raw.shape, np.nan), normals_of)
+
+
+def new_local_map(config: OdometryConfig, sensor: LidarModel | None) -> LocalMap:
+    """An empty local map with the config's parameters (noise: the sensor's range sigma, else 2 cm)."""
+    noise = config.ncf_range_noise_std_m or (sensor.range_noise_std_m if sensor is not None else None) or 0.02
+    return LocalMap(config.map_voxel_size_m, config.map_points_per_voxel,
+                    config.map_max_distance_m or config.max_range_m, config.normal_neighbours, noise,
+                    config.max_curvature)
+
+
+def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:
+    """(V, 3) the scan's voxel centroids in the world frame: what it adds to the map."""
+    return se3.transform_points(T_world_lidar, scan.centroids)
+
+
+def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.ndarray, period_s: float) -> None:
+    """Re-do the de-skew of a filtered scan's points, normals and centroids with a better motion (in place)."""
+    scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, old_motion, new_motion, period_s)
+    if scan.centroid_times_s is not None and len(scan.centroids):
+        scan.centroids, _ = redeskew(scan.centroids, scan.centroids, scan.centroid_times_s, old_motion, new_motion,
+                                     period_s)
+
+
+@dataclass
+class OdometryState:
+    """What the odometry carries from frame to frame.
+
+    poses: ``T_world_lidar`` (4, 4) of every frame so far; the world is the first scan's frame.
+    T_prev_cur: the last frame-to-frame motion (4, 4): the constant-velocity prediction.
+    last_stamp_s, last_period_s: the previous sweep's start time and period, s.
+    target_scan: the last scan that had points (scan-to-scan target; and the first
+        scan until the first registration, for the cold start).
+    target_frame: its frame index. target_motion: the motion its points are de-skewed with.
+    local_map: the map of recent scans (``match_target: map``), else None.
+    """
+
+    poses: list[np.ndarray] = field(default_factory=list)
+    T_prev_cur: np.ndarray = field(default_factory=lambda: np.eye(4))
+    last_stamp_s: float | None = None
+    last_period_s: float | None = None
+    target_scan: FilteredScan | None = None
+    target_frame: int = 0
+    target_motion: np.ndarray = field(default_factory=lambda: np.eye(4))
+    local_map: LocalMap | None = None
+
+
 class Odometry:
-    """Scan-to-scan ICP odometry (Alg. 1) with the paper's filters and rejectors.
+    """ICP odometry (Alg. 1) with the paper's filters and rejectors, scan-to-scan or scan-to-map.
 
     Args:
         config: the variant's parameters (``odometry.config``).
         sensor: the lidar model; needed by the GCR (ring pitches, azimuth step),
             and by the sensor-aware NCF for its range noise unless the config sets it.
 
-    ``register`` returns the pose ``T_first_lidar`` (4, 4) of each scan in the
-    first scan's frame; ``last`` holds the latest ``FrameDiagnostics``.
+    ``register`` returns the pose ``T_world_lidar`` (4, 4) of each scan in the
+    first scan's frame; ``last`` holds the latest ``FrameDiagnostics``. Each frame
+    goes through the stages below, functions of this module, ``odometry.filters``
+    and ``odometry.icp``::
+
+        clean        clean_scan: finite points within the range limits
+        de-skew      deskew with the constant-velocity motion (per-point times known)
+        filter       filter_scan: voxel grid -> kNN normals -> NCF -> curvature
+        source       make_source: points, normals, GCR thresholds
+        target       the previous scan (scan_target) or the local map (LocalMap.target)
+        register     icp.register from the constant-velocity prediction
+        refine       re-de-skew with the frame's own estimate and register again
+        update       pose, motion, next target / map insertion
     """
 
     def __init__(self, config: OdometryConfig, sensor: LidarModel | None = None):
@@ -115,20 +243,15 @@ class Odometry:
             )
         self.config = config
         self.sensor = sensor
-        self.poses: list[np.ndarray] = []
+        self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match_target == "map" else None)
         self.diagnostics: list[FrameDiagnostics] = []
-        self._previous: FilteredScan | None = None
-        self._target: Target | None = None
-        self._motion = np.eye(4)  # last T_{i-1, i}: the constant-velocity guess
-        self._last_stamp: float | None = None
-        self._last_period: float | None = None
-        self._use_gcr = False
         # The rejection chains, built once: with GCR, and without (the first registration)
         self._chain_with_gcr = rejectors_for(config)
         self._chain_without_gcr = rejectors_for(config.replace(gcr=False))
-        self._previous_motion = np.eye(4)  # the motion the stored target was de-skewed with
-        self._target_pose = np.eye(4)  # pose of the target scan (T_first_lidar) and its frame index
-        self._target_frame = 0
+
+    @property
+    def poses(self) -> list[np.ndarray]:
+        return self.state.poses
 
     @property
     def last(self) -> FrameDiagnostics | None:
@@ -145,136 +268,45 @@ class Odometry:
         rings: np.ndarray | None = None,
         stamp_s: float | None = None,
     ) -> np.ndarray:
-        """Register the next scan and return its pose ``T_first_lidar`` (4, 4).
+        """Register the next scan and return its pose ``T_world_lidar`` (4, 4).
 
         points: (N, 3) as measured, m. times_s: (N,) per-point time since the sweep
         start, s (enables de-skew). rings: (N,) int ring per point (else from the
         elevation and the sensor table). stamp_s: the sweep's start time, s.
         """
-        cfg = self.config
+        cfg, st = self.config, self.state
         t_start = time.perf_counter()
-        diag = FrameDiagnostics(frame=len(self.poses), points_raw=len(points))
+        diag = FrameDiagnostics(frame=len(st.poses))
         seconds: dict[str, float] = {}
 
-        # clean
-        points = np.asarray(points, dtype=np.float64)
-        finite = np.all(np.isfinite(points), axis=1)
-        diag.points_nonfinite = int((~finite).sum())
-        safe = np.where(finite[:, None], points, 0.0)
-        r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
-        keep = finite & (r >= cfg.min_range_m) & (r <= cfg.max_range_m)
-        points = points[keep]
-        times_s = None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep]
-        rings = None if rings is None else np.asarray(rings)[keep]
-        diag.points_in_range = len(points)
-        if cfg.kitti_vertical_correction_deg:
-            points = correct_kitti_vertical_angle(points, cfg.kitti_vertical_correction_deg)
-
-        # de-skew with the constant-velocity motion over this frame's period
+        clean = clean_scan(points, times_s, rings, cfg, diag)
         period = self._frame_period(stamp_s)
-        T_guess = self._motion_over(period)
+        T_guess = self._predicted_motion(period)
+
         t = time.perf_counter()
-        deskewing = cfg.deskew and times_s is not None
+        deskewing = cfg.deskew and clean.times_s is not None
         if deskewing:
-            points = deskew(points, times_s, T_guess, period)
+            clean.points = deskew(clean.points, clean.times_s, T_guess, period)
             diag.deskewed = True
         seconds["deskew"] = time.perf_counter() - t
 
-        # filter
-        if rings is None and cfg.gcr:
-            rings = ring_of_points(points, self.sensor)
-        scan = filter_scan(points, cfg, rings, self.sensor.range_noise_std_m if self.sensor else None,
-                           raw_times_s=times_s if deskewing else None)
+        if clean.rings is None and cfg.gcr:
+            clean.rings = ring_of_points(clean.points, self.sensor)
+        scan = filter_scan(clean.points, cfg, clean.rings, self.sensor.range_noise_std_m if self.sensor else None,
+                           raw_times_s=clean.times_s if deskewing else None)
         diag.filter_counts = scan.counts
         seconds.update(scan.seconds)
         diag.too_few_points = len(scan) < cfg.min_points
 
-        # init + align
-        T_deskew = T_guess  # the motion the scan is currently de-skewed with
-        if not self.poses:
+        T_deskew = T_guess  # the motion the scan is de-skewed with now
+        if not st.poses:
             T = np.eye(4)
-        elif diag.too_few_points or self._target is None:
+        elif diag.too_few_points or (st.target_scan is None and st.local_map is None):
             T = T_guess
         else:
-            # GCR bounds matches by the sensor's sampling spacing (cm to dm), so it needs a
-            # close initial guess; the first registration has no motion to extrapolate and
-            # starts from identity, so it runs without GCR.
-            self._use_gcr = cfg.gcr and len(self.poses) > 1
-            # The target is the last scan that had points: usually the previous frame, else
-            # older; poses go through it (T_target_source) and back to a per-frame motion.
-            to_frame = (np.eye(4) if self._target_frame == len(self.poses) - 1  # previous frame <- target
-                        else np.linalg.inv(self.poses[-1]) @ self._target_pose)
-            T_init = se3.inverse(to_frame) @ T_guess
-            source = self._source(scan)
-            result = register(source, self._target, T_init, cfg, self._rejectors())
-            icp_seconds, icp_iterations = dict(result.seconds), result.iterations
-            # The de-skew used the previous frame's motion. The estimate responds to the
-            # de-skew motion with a gain near -1 (a too-fast de-skew makes the scan look
-            # closer), so plain re-use of the estimate oscillates: move the de-skew motion
-            # halfway towards the estimate (a damped fixed-point iteration) and refine.
-            # Only the filtered points are moved, so this is cheap.
-            first = len(self.poses) == 1
-            for _ in range(cfg.deskew_refinements if deskewing else 0):
-                if result.singular:
-                    break
-                motion = to_frame @ result.T_target_source  # this frame's estimated motion
-                if first and self._previous.times_s is not None and cfg.match_target == "filtered":
-                    # Cold start: the first two scans were de-skewed as if standing still. Both
-                    # are re-de-skewed with the estimate, so source and target stay consistent
-                    # and the estimate can be taken as it is.
-                    M = motion
-                    prev = self._previous
-                    prev.points, prev.normals = redeskew(prev.points, prev.normals, prev.times_s,
-                                                         self._previous_motion, M, period)
-                    self._previous_motion = M
-                    self._target = self._make_target(prev)
-                else:
-                    M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
-                scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, M, period)
-                T_deskew = M
-                # The GCR thresholds scale with range and incidence, which a re-de-skew by a
-                # few centimetres does not change: they are reused.
-                source = Source(scan.points, scan.normals, source.gcr_threshold_m)
-                refined = register(source, self._target, result.T_target_source, cfg, self._rejectors())
-                for stage, spent in refined.seconds.items():  # stage times and iterations cover every registration
-                    icp_seconds[stage] += spent
-                icp_iterations += refined.iterations
-                if refined.singular:  # keep the last good estimate: the frame is not extrapolated
-                    break
-                result = refined
-            self._record(diag, result)
-            diag.iterations = icp_iterations
-            seconds.update(icp_seconds)
-            T = to_frame @ result.T_target_source
-            # A car cannot change its motion by metres within one frame: such an estimate is
-            # a failed registration (degenerate scene, wrong local minimum), not motion.
-            deviation = se3.inverse(T_guess) @ T
-            if not first and (np.linalg.norm(deviation[:3, 3]) > cfg.max_prediction_error_m
-                              or np.degrees(se3.rotation_angle(deviation)) > cfg.max_prediction_error_deg):
-                diag.implausible = True
-                T = T_guess
+            T, T_deskew = self._align(scan, T_guess, period, deskewing, diag, seconds)
 
-        # update; the next target is this scan de-skewed with the motion just estimated,
-        # so that source and target of the next registration share one motion model
-        pose = self.poses[-1] @ T if self.poses else np.eye(4)
-        if self.poses:
-            self._motion = T
-        self.poses.append(pose)
-        if not diag.too_few_points:
-            if deskewing and len(self.poses) > 1:
-                t = time.perf_counter()
-                scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, T_deskew, T, period)
-                if cfg.match_target == "raw":
-                    scan.raw_points = deskew(deskew(points, times_s, se3.inverse(T_guess), period), times_s, T,
-                                             period)
-                    scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
-                seconds["deskew"] += time.perf_counter() - t
-            self._previous = scan
-            self._previous_motion = T if deskewing and len(self.poses) > 1 else T_deskew
-            self._target = self._make_target(scan)
-            self._target_pose = pose
-            self._target_frame = len(self.poses) - 1
-        self._last_period = period
+        self._update(scan, T, T_deskew, T_guess, clean.times_s if deskewing else None, period, diag, seconds)
         seconds["total"] = time.perf_counter() - t_start
         diag.seconds = seconds
         self.diagnostics.append(diag)
@@ -284,48 +316,136 @@ class Odometry:
             # INFO, not WARNING: a degenerate stretch flags frame after frame, which would bury a
             # progress bar; the diagnostics carry the flags and the commands print their count.
             log.info("frame %d: %s; pose extrapolated", diag.frame, why)
-        return pose
+        return st.poses[-1]
 
-    # ---- helpers
+    # ---- stages
+    def _align(self, scan: FilteredScan, T_guess: np.ndarray, period: float, deskewing: bool,
+               diag: FrameDiagnostics, seconds: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Register, refine the de-skew, check plausibility: (T_prev_cur, the motion the scan is de-skewed with)."""
+        cfg, st = self.config, self.state
+        first = len(st.poses) == 1
+        # GCR bounds matches by the sensor's sampling spacing (cm to dm), so it needs a close
+        # initial guess; the first registration has no motion to extrapolate and starts from
+        # identity, so it runs without GCR.
+        chain = self._chain_with_gcr if cfg.gcr and not first else self._chain_without_gcr
+        # Transforms into the target's frame: the world for a map; for scan-to-scan the target
+        # scan, usually the previous frame (then exactly the identity: rounding must not feed back).
+        T_world_prev = st.poses[-1]
+        previous_is_target = st.local_map is None and st.target_frame == len(st.poses) - 1
+        if st.local_map is not None:
+            T_target_prev = T_world_prev
+        elif previous_is_target:
+            T_target_prev = np.eye(4)
+        else:
+            T_target_prev = se3.inverse(st.poses[st.target_frame]) @ T_world_prev
+        target = self._target()
+        source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
+        result = register(source, target, T_target_prev @ T_guess, cfg, chain, T_target_prev)
+        icp_seconds, icp_iterations = dict(result.seconds), result.iterations
+        T_deskew = T_guess
+
+        def motion_of(T_target_cur: np.ndarray) -> np.ndarray:
+            return T_target_cur if previous_is_target else se3.inverse(T_target_prev) @ T_target_cur
+
+        # The de-skew used the previous frame's motion. The estimate responds to the de-skew
+        # motion with a gain near -1 (a too-fast de-skew makes the scan look closer), so plain
+        # re-use of the estimate oscillates: move the de-skew motion halfway towards the
+        # estimate (a damped fixed-point iteration) and refine. Only the filtered points move.
+        for _ in range(cfg.deskew_refinements if deskewing else 0):
+            if result.singular:
+                break
+            motion = motion_of(result.T_target_source)
+            if first and st.target_scan is not None and st.target_scan.times_s is not None:
+                # Cold start: the first scan was de-skewed as if standing still. It is
+                # re-de-skewed with the estimate too, so source and target share one motion
+                # model and the estimate can be taken as it is.
+                M = motion
+                redeskew_scan(st.target_scan, st.target_motion, M, period)
+                st.target_motion = M
+                if st.local_map is not None:
+                    st.local_map = new_local_map(cfg, self.sensor)
+                    st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
+                target = self._target()
+            else:
+                M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
+            redeskew_scan(scan, T_deskew, M, period)
+            T_deskew = M
+            # The GCR thresholds scale with range and incidence, which a re-de-skew by a
+            # few centimetres does not change: they are reused.
+            source = Source(scan.points, scan.normals, source.gcr_threshold_m)
+            refined = register(source, target, result.T_target_source, cfg, chain, T_target_prev)
+            for stage, spent in refined.seconds.items():  # stage times and iterations cover every registration
+                icp_seconds[stage] += spent
+            icp_iterations += refined.iterations
+            if refined.singular:  # keep the last good estimate: the frame is not extrapolated
+                break
+            result = refined
+        self._record(diag, result)
+        diag.iterations = icp_iterations
+        seconds.update(icp_seconds)
+        T = T_guess if result.singular else se3.orthonormalize(motion_of(result.T_target_source))
+        # A car cannot change its motion by metres within one frame: such an estimate is
+        # a failed registration (degenerate scene, wrong local minimum), not motion.
+        deviation = se3.inverse(T_guess) @ T
+        if not first and (np.linalg.norm(deviation[:3, 3]) > cfg.max_prediction_error_m
+                          or np.degrees(se3.rotation_angle(deviation)) > cfg.max_prediction_error_deg):
+            diag.implausible = True
+            T = T_guess
+        return T, T_deskew
+
+    def _update(self, scan: FilteredScan, T: np.ndarray, T_deskew: np.ndarray, T_guess: np.ndarray,
+                raw_times_s: np.ndarray | None, period: float, diag: FrameDiagnostics, seconds: dict) -> None:
+        """Pose and motion; the scan, de-skewed with the motion just estimated, becomes the next
+        target or joins the map, so that source and target share one motion model.
+
+        T: this frame's motion T_prev_cur; T_deskew: the motion its filtered points are
+        de-skewed with now; T_guess: the one its raw points are; raw_times_s: (N,) or None.
+        """
+        cfg, st = self.config, self.state
+        # (re-orthonormalised: with a map, T = previous^-1 x estimate feeds rounding back)
+        pose = se3.orthonormalize(st.poses[-1] @ T) if st.poses else np.eye(4)
+        if st.poses:
+            st.T_prev_cur = T
+        st.poses.append(pose)
+        st.last_period_s = period
+        if diag.too_few_points:
+            return
+        t = time.perf_counter()
+        redo = raw_times_s is not None and len(st.poses) > 1
+        if redo:
+            redeskew_scan(scan, T_deskew, T, period)
+            if cfg.match_target == "raw":
+                scan.raw_points, _ = redeskew(scan.raw_points, scan.raw_points, raw_times_s, T_guess, T, period)
+                scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
+        st.target_scan = scan
+        st.target_frame = len(st.poses) - 1
+        st.target_motion = T if redo else T_deskew
+        if st.local_map is not None:
+            st.local_map.update(map_points(scan, pose), pose[:3, 3])
+        seconds["deskew" if st.local_map is None else "map"] = (
+            seconds.get("deskew", 0.0) if st.local_map is None else 0.0) + time.perf_counter() - t
+
+    def _target(self) -> Target:
+        st = self.state
+        return st.local_map.target() if st.local_map is not None else scan_target(st.target_scan, self.config)
+
     def _frame_period(self, stamp_s: float | None) -> float:
-        if stamp_s is not None and self._last_stamp is not None and stamp_s > self._last_stamp:
-            period = stamp_s - self._last_stamp
+        st = self.state
+        if stamp_s is not None and st.last_stamp_s is not None and stamp_s > st.last_stamp_s:
+            period = stamp_s - st.last_stamp_s
         elif self.sensor is not None:
             period = self.sensor.sweep_period_s
         else:
-            period = 0.1
-        self._last_stamp = stamp_s
+            period = DEFAULT_FRAME_PERIOD_S
+        st.last_stamp_s = stamp_s
         return period
 
-    def _motion_over(self, period: float) -> np.ndarray:
+    def _predicted_motion(self, period: float) -> np.ndarray:
         """The last relative motion rescaled to a frame of ``period`` seconds."""
-        if self._last_period is None or abs(period - self._last_period) < 1e-9:
-            return self._motion.copy()
-        return se3.exp(se3.log(self._motion) * (period / self._last_period))
-
-    def _rejectors(self):
-        return self._chain_with_gcr if self._use_gcr else self._chain_without_gcr
-
-    def _source(self, scan: FilteredScan) -> Source:
-        threshold = None
-        if self._use_gcr:
-            threshold = gcr_threshold_m(scan.points, scan.normals, scan.rings, self.sensor,
-                                        self.config.gcr_formula, self.config.gcr_noise_floor_m)
-            threshold[np.isnan(threshold)] = np.inf  # no neighbour beam to bound the match: keep it
-        return Source(scan.points, scan.normals, threshold)
-
-    def _make_target(self, scan: FilteredScan) -> Target:
-        if self.config.match_target == "filtered":
-            return Target(scan.points, cKDTree(scan.points), scan.normals)
-        # the raw (de-skewed) scan; its normals are estimated only where matched
-        from .normals import estimate_normals
-
-        raw, tree, k = scan.raw_points, scan.raw_tree, self.config.normal_neighbours
-
-        def normals_of(rows: np.ndarray) -> np.ndarray:
-            return estimate_normals(raw, k=k, query_points=raw[rows], tree=tree).normals
-
-        return Target(raw, tree, np.full(raw.shape, np.nan), normals_of)
+        st = self.state
+        if st.last_period_s is None or abs(period - st.last_period_s) < 1e-9:
+            return st.T_prev_cur.copy()
+        return se3.exp(se3.log(st.T_prev_cur) * (period / st.last_period_s))
 
     @staticmethod
     def _record(diag: FrameDiagnostics, result: RegistrationResult) -> None:
@@ -335,6 +455,8 @@ class Odometry:
         diag.rms_m = result.rms_m
         diag.info_eigenvalues = result.info_eigenvalues
         diag.translation_eigenvalues = result.translation_eigenvalues
+        diag.weakest_direction = result.weakest_direction
+        diag.remapped = result.remapped
         diag.degenerate = result.degenerate
         diag.singular = result.singular
 
@@ -410,7 +532,7 @@ def write_tum(path: str | Path, poses: np.ndarray, times_s: np.ndarray) -> None:
 
 
 def default_times(n: int, sensor: LidarModel | None) -> np.ndarray:
-    period = sensor.sweep_period_s if sensor is not None else 0.1
+    period = sensor.sweep_period_s if sensor is not None else DEFAULT_FRAME_PERIOD_S
     return np.arange(n) * period
 
 

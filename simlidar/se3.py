@@ -37,6 +37,19 @@ def inverse(T: np.ndarray) -> np.ndarray:
     return make(R, -np.einsum("...ij,...j->...i", R, T[..., :3, 3]))
 
 
+def orthonormalize(T: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) with the rotation block replaced by the nearest rotation (polar decomposition).
+
+    Products of transforms and their transpose-inverses accumulate rounding that a
+    feedback loop (pose = previous pose x (previous pose^-1 x estimate)) can double
+    every step; projecting back onto SO(3) keeps it at machine precision.
+    """
+    T = np.array(T, dtype=float)
+    U, _, Vt = np.linalg.svd(T[..., :3, :3])
+    T[..., :3, :3] = U @ Vt
+    return T
+
+
 def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply a (4, 4) transform to (N, 3) points."""
     return points @ T[:3, :3].T + T[:3, 3]

@@ -1,0 +1,119 @@
+"""How well a set of point-to-plane constraints pins down each direction of motion.
+
+For a point p with unit normal n, a small motion (rho, omega) changes the
+point-to-plane residual by ``n . rho + (p x n) . omega``: the row
+``J = [n, p x n]``. The information of a set of points is ``H = sum J^T J``
+(6 x 6); a direction u of motion is constrained by ``u^T H u``. Translation (m)
+and rotation (rad) differ in unit, so directions are compared in scaled
+coordinates ``(rho, L omega)`` with a length L (``rotation_scale_m``, about the
+distance of the points that constrain rotation): the rows become
+``[n, (p x n) / L]``, dimensionless, and ``H / N`` (per point) has eigenvalues
+in [0, 1] for the translation part: a direction with eigenvalue 1/3 is as well
+constrained as a direction can be among three, a tunnel's axis has about 1e-3.
+
+Two uses, one threshold (``min_eigenvalue``, per point):
+
+- ``remapped_step``: the degeneracy-aware Gauss-Newton step (solution remapping,
+  Zhang, Kaess and Singh, ICRA 2016): directions of H whose eigenvalue per match
+  is below the threshold get no update, so the estimate keeps the motion
+  prior there (the ICP starts at the constant-velocity prediction); the
+  well-constrained directions are solved as usual.
+- ``restore_constraints``: a point filter (the NCF) must not remove the last
+  evidence for a direction. A direction that the filtered points constrain
+  below the threshold, and the unfiltered points better, gets back the rejected
+  points that carry most of it, until it reaches the threshold or all it had.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def constraint_rows(points: np.ndarray, normals: np.ndarray, rotation_scale_m: float) -> np.ndarray:
+    """(N, 6) scaled rows ``[n, (p x n) / L]`` of (N, 3) points and unit normals."""
+    return np.hstack([normals, np.cross(points, normals) / rotation_scale_m])
+
+
+def scale_matrix(rotation_scale_m: float) -> np.ndarray:
+    """(6,) diagonal D mapping scaled coordinates (rho, L omega) back to (rho, omega): x = D y."""
+    return np.array([1.0, 1.0, 1.0, 1.0 / rotation_scale_m, 1.0 / rotation_scale_m, 1.0 / rotation_scale_m])
+
+
+@dataclass
+class Solve:
+    """A Gauss-Newton solve of ``H x = -g``.
+
+    xi: (6,) the increment (rho m, omega rad). rank: directions solved numerically.
+    remapped: well-determined directions left at the prior because they were weak.
+    eigenvalues: (6,) ascending eigenvalues of the scaled per-match information.
+    """
+
+    xi: np.ndarray
+    rank: int
+    remapped: int
+    eigenvalues: np.ndarray
+
+
+def remapped_step(H: np.ndarray, g: np.ndarray, n: int, rotation_scale_m: float,
+                  min_eigenvalue: float = 0.0, rcond: float = 1e-10) -> Solve:
+    """Solve ``H x = -g`` in the scaled eigenbasis, leaving weak directions unchanged.
+
+    H: (6, 6) ``J^T J`` in (rho, omega); g: (6,) ``J^T r``; n: number of matches.
+    Directions with scaled eigenvalue per match below ``min_eigenvalue`` (0: none)
+    or numerically zero (``rcond`` of the largest) get no update.
+    """
+    d = scale_matrix(rotation_scale_m)
+    Hs = H * d[:, None] * d[None, :] / max(n, 1)
+    gs = g * d / max(n, 1)
+    w, V = np.linalg.eigh(Hs)
+    numeric = w > rcond * max(w[-1], 1e-300)
+    solved = numeric & (w >= min_eigenvalue)
+    y = -(V[:, solved] @ ((V[:, solved].T @ gs) / w[solved]))
+    return Solve(d * y, int(numeric.sum()), int((numeric & ~solved).sum()), w)
+
+
+def weakest_translation(H: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """((3,) ascending eigenvalues of the per-match translation block, (3,) unit eigenvector of the smallest).
+
+    The vector's sign is fixed so that its largest component is positive (a direction, not an arrow).
+    """
+    w, V = np.linalg.eigh(H[:3, :3] / max(n, 1))
+    v = V[:, 0]
+    return w, v if v[np.argmax(np.abs(v))] > 0 else -v
+
+
+def restore_constraints(points: np.ndarray, normals: np.ndarray, candidates: np.ndarray, kept: np.ndarray,
+                        min_eigenvalue: float, rotation_scale_m: float) -> np.ndarray:
+    """Keep-mask ``kept`` with rejected candidates restored where a direction would be lost.
+
+    points, normals: (M, 3) in the scan's frame; candidates: (M,) bool, points the
+    filter judged (finite normals); kept: (M,) bool subset, what it kept.
+    Information is per candidate point (``H / n_candidates``), so a filter that
+    keeps half the points of a well-constrained direction still leaves it at half.
+    Returns the (M,) keep mask (a superset of ``kept``).
+    """
+    n_all = int(candidates.sum())
+    kept = kept & candidates
+    if n_all == 0 or min_eigenvalue <= 0:
+        return kept
+    J = constraint_rows(points, normals, rotation_scale_m)
+    H_all = J[candidates].T @ J[candidates] / n_all
+    out = kept.copy()
+    H_kept = J[kept].T @ J[kept] / n_all
+    w, V = np.linalg.eigh(H_kept)
+    for lam, u in zip(w, V.T, strict=True):
+        if lam >= min_eigenvalue:
+            break
+        goal = min(min_eigenvalue, float(u @ H_all @ u))
+        have = float(u @ (J[out].T @ J[out]) @ u) / n_all  # earlier restorations count
+        if have >= goal:
+            continue
+        rejected = np.flatnonzero(candidates & ~out)
+        gain = (J[rejected] @ u) ** 2 / n_all
+        order = np.argsort(-gain)
+        reach = np.searchsorted(np.cumsum(gain[order]), goal - have) + 1
+        out[rejected[order[:reach]]] = True
+    return out
+

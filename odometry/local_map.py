@@ -1,0 +1,202 @@
+"""A local map of recent registered scans: the target of scan-to-map registration.
+
+Why a map. Scan-to-scan registration matches a scan against the previous one,
+whose sampling pattern (the rings on the ground) moves with the sensor: on
+sparse-ring ground the two patterns pull the estimate towards zero motion, and
+a normal fitted to points of one ring is tilted by the beam's elevation. Both
+biases add up frame after frame (vertical drift, an estimate that stops). A map
+of many scans, held in the world frame, breaks both: its points come from many
+sensor positions, so the rings of different scans cross every patch of ground
+and a neighbourhood spans several of them.
+
+Design (the voxel map of KISS-ICP, Vizzo et al. 2023, with normals computed in
+the map): points in world coordinates, bucketed in cubic voxels of
+``voxel_size_m`` holding at most ``max_points_per_voxel`` points each (a full
+voxel takes no more points, so the map keeps its first, stable observations and
+its size is bounded by the volume, not the time); points farther than
+``max_distance_m`` from the sensor are dropped. A target normal is the PCA
+normal of the target point's ``normal_neighbours`` nearest map points, computed
+only for points that are matched, and only where the neighbourhood is a plane:
+its second axis must be resolved above the noise (the significance test of
+``odometry.ncf``, with isotropic noise of the sensor's range sigma) and its
+curvature below ``max_curvature``. Other targets get a nan normal: the ICP drops
+those matches (a line or a corner does not define a plane).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .icp import Target
+from .ncf import DEFAULT_GAP_SIGNIFICANCE_Z
+from .normals import estimate_normals
+
+_KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
+_KEY_OFFSET = 1 << (_KEY_BITS - 1)
+_KEY_MASK = (1 << _KEY_BITS) - 1
+
+
+def voxel_keys(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
+    """(N, 3) points -> (N,) int64 key of the cubic voxel holding each point."""
+    ijk = np.floor(points / voxel_size_m).astype(np.int64) + _KEY_OFFSET
+    if len(ijk) and (ijk.min() < 0 or ijk.max() > _KEY_MASK):
+        raise ValueError(f"points beyond +-{_KEY_OFFSET * voxel_size_m:.3g} m cannot be put in the voxel map")
+    return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
+
+
+_NEIGHBOUR_OFFSETS = np.array([(di << (2 * _KEY_BITS)) + (dj << _KEY_BITS) + dk
+                               for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)], dtype=np.int64)
+
+
+def neighbourhood_keys(keys: np.ndarray) -> np.ndarray:
+    """(K,) voxel keys -> sorted unique keys of those voxels and their 26 neighbours."""
+    return np.unique((keys[:, None] + _NEIGHBOUR_OFFSETS[None, :]).ravel())
+
+
+def rank_within_groups(sorted_keys: np.ndarray) -> np.ndarray:
+    """(N,) 0, 1, 2, ... counting up within each run of equal values of a sorted array."""
+    n = len(sorted_keys)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    idx = np.arange(n)
+    first = np.ones(n, dtype=bool)
+    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
+    return idx - np.maximum.accumulate(np.where(first, idx, 0))
+
+
+def plane_normals_valid(estimate, noise_std_m: float, max_curvature: float,
+                        significance_z: float = DEFAULT_GAP_SIGNIFICANCE_Z) -> np.ndarray:
+    """(M,) bool: the neighbourhoods of a ``NormalEstimate`` define a plane.
+
+    The second axis must stand out of the noise: the eigen-gap ``s_1^2 - s_2^2`` of
+    the scatter must exceed ``significance_z`` standard deviations of what isotropic
+    noise of ``noise_std_m`` alone gives along it (``odometry.ncf._resolved_gaps``,
+    with ``N = (k - 1) sigma^2 I``), and the PCL curvature must be at most ``max_curvature``.
+    """
+    k = estimate.k
+    lam = estimate.scatter_eigenvalues
+    margin = significance_z * math.sqrt(2.0 / max(k - 1, 1)) * (k - 1) * noise_std_m**2
+    with np.errstate(invalid="ignore"):
+        planar = (lam[:, 1] - lam[:, 2]) > margin
+        flat = estimate.curvature <= max_curvature
+    return planar & flat & np.isfinite(estimate.normals).all(axis=1)
+
+
+@dataclass
+class MapStats:
+    """Size of the map after an update: points, occupied voxels, points added and dropped."""
+
+    points: int
+    voxels: int
+    added: int
+    dropped: int
+
+
+class LocalMap:
+    """Voxel-bucketed world points of recent scans with lazily estimated plane normals.
+
+    Args:
+        voxel_size_m: edge of the map's voxels, m.
+        max_points_per_voxel: a voxel holding this many points takes no more.
+        max_distance_m: points farther than this from the sensor are dropped, m.
+        normal_neighbours: k of the target normals' kNN among the map points.
+        noise_std_m: the range noise sigma, for the planarity test of target normals, m.
+        max_curvature: PCL curvature above which a target neighbourhood is not a plane.
+    """
+
+    def __init__(self, voxel_size_m: float, max_points_per_voxel: int, max_distance_m: float,
+                 normal_neighbours: int, noise_std_m: float, max_curvature: float):
+        self.voxel_size_m = float(voxel_size_m)
+        self.max_points_per_voxel = int(max_points_per_voxel)
+        self.max_distance_m = float(max_distance_m)
+        self.normal_neighbours = int(normal_neighbours)
+        self.noise_std_m = float(noise_std_m)
+        self.max_curvature = float(max_curvature)
+        self.points = np.zeros((0, 3))
+        self._keys = np.zeros(0, dtype=np.int64)  # voxel key of each point
+        # Target normals, estimated when first matched and kept until points arrive nearby:
+        # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
+        self._normals = np.zeros((0, 3))
+        self._known = np.zeros(0, dtype=bool)
+        self._voxel_keys = np.zeros(0, dtype=np.int64)  # sorted occupied voxels
+        self._voxel_counts = np.zeros(0, dtype=np.int64)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @property
+    def empty(self) -> bool:
+        return len(self.points) == 0
+
+    def update(self, points_world: np.ndarray, sensor_position_m: np.ndarray) -> MapStats:
+        """Add (N, 3) world points where their voxels have room, then drop far points."""
+        added = self._insert(np.asarray(points_world, dtype=np.float64))
+        dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
+        return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
+
+    def _insert(self, points: np.ndarray) -> int:
+        if len(points) == 0:
+            return 0
+        keys = voxel_keys(points, self.voxel_size_m)
+        order = np.argsort(keys, kind="stable")
+        keys, points = keys[order], points[order]
+        pos = np.searchsorted(self._voxel_keys, keys)
+        inside = pos < len(self._voxel_keys)
+        known = np.zeros(len(keys), dtype=bool)
+        known[inside] = self._voxel_keys[pos[inside]] == keys[inside]
+        held = np.zeros(len(keys), dtype=np.int64)
+        held[known] = self._voxel_counts[pos[known]]
+        accept = held + rank_within_groups(keys) < self.max_points_per_voxel
+        if not accept.any():
+            return 0
+        keys, points = keys[accept], points[accept]
+        self.points = np.concatenate([self.points, points])
+        self._keys = np.concatenate([self._keys, keys])
+        self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
+        self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
+        # a kNN neighbourhood (< 1 voxel across) of a point next to a changed voxel may have changed
+        self._known[np.isin(self._keys, neighbourhood_keys(np.unique(keys)))] = False
+        self._recount(np.concatenate([self._voxel_keys, keys]),
+                      np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
+        return int(len(keys))
+
+    def _prune(self, position: np.ndarray) -> int:
+        d2 = np.einsum("ij,ij->i", self.points - position, self.points - position)
+        far = d2 > self.max_distance_m**2
+        n = int(far.sum())
+        if n:
+            self._recount(np.concatenate([self._voxel_keys, self._keys[far]]),
+                          np.concatenate([self._voxel_counts, -np.ones(n, dtype=np.int64)]))
+            self.points, self._keys = self.points[~far], self._keys[~far]
+            self._normals, self._known = self._normals[~far], self._known[~far]
+        return n
+
+    def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
+        """Occupied voxels and their counts from (key, count change) pairs."""
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        total = np.bincount(inverse, weights=counts, minlength=len(uniq)).astype(np.int64)
+        keep = total > 0
+        self._voxel_keys, self._voxel_counts = uniq[keep], total[keep]
+
+    def target(self) -> Target:
+        """The map as a registration target (world frame): a k-d tree over its points and
+        normals estimated on demand for the matched points (nan where no plane)."""
+        points = self.points
+        tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        k = min(self.normal_neighbours, len(points))
+
+        def normals_of(rows: np.ndarray) -> np.ndarray:
+            if k < 3:
+                return np.full((len(rows), 3), np.nan)
+            # (a normal's sign does not matter to a point-to-plane residual: r and J flip together)
+            est = estimate_normals(points, k=k, query_points=points[rows], tree=tree)
+            n = est.normals.copy()
+            n[~plane_normals_valid(est, self.noise_std_m, self.max_curvature)] = np.nan
+            return n
+
+        return Target(points, tree, self._normals, normals_of, self._known)
+
