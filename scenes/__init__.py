@@ -15,7 +15,7 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import city, forest, highway, open_field, tunnel
+from . import city, forest, highway, open_field, suburb, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve
 
@@ -27,6 +27,7 @@ SCENES: dict[str, ModuleType] = {
     "highway": highway,
     "open": open_field,
     "forest": forest,
+    "suburb": suburb,
 }
 
 
