@@ -15,7 +15,7 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import city, forest, highway, open_field, suburb, tunnel
+from . import canyon, city, forest, highway, open_field, suburb, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve
 
@@ -28,6 +28,7 @@ SCENES: dict[str, ModuleType] = {
     "open": open_field,
     "forest": forest,
     "suburb": suburb,
+    "canyon": canyon,
 }
 
 
