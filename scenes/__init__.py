@@ -6,6 +6,9 @@ package knows nothing of the simulator: it makes a mesh and poses.
 
     from scenes import build_scene, scene_parameters
     scene = build_scene("tunnel", seed=3, length_m=600)
+
+``scenes.families`` draws randomised parameters of scene families for a
+held-out generalisation suite.
 """
 
 from __future__ import annotations

@@ -101,6 +101,7 @@ class Params(CommonParams):
             raise ValueError("parameter tunnel_height_m: an arch needs tunnel_height_m >= tunnel_width_m / 2 + 1")
 
     def bore(self) -> tunnel.Bore:
+        """The tunnel's bore for ``tunnel.add_bore`` / ``add_fittings``."""
         return tunnel.Bore(self.tunnel_width_m, self.tunnel_height_m, self.tunnel_cross_section,
                            self.walkway_width_m, self.overburden_m, self.feature_spacing_m)
 
