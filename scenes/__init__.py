@@ -6,6 +6,9 @@ package knows nothing of the simulator: it makes a mesh and poses.
 
     from scenes import build_scene, scene_parameters
     scene = build_scene("tunnel", seed=3, length_m=600)
+
+``scenes.families`` draws randomised parameters of scene families for a
+held-out generalisation suite.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import city, forest, highway, open_field, tunnel
+from . import canyon, city, forest, highway, open_field, suburb, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve
 
@@ -27,6 +30,8 @@ SCENES: dict[str, ModuleType] = {
     "highway": highway,
     "open": open_field,
     "forest": forest,
+    "suburb": suburb,
+    "canyon": canyon,
 }
 
 

@@ -10,6 +10,7 @@ its normal points along ``dP/di x dP/dj``.
 
 from __future__ import annotations
 
+import copy
 import functools
 
 import numpy as np
@@ -29,6 +30,20 @@ def place(part: Part, yaw: float = 0.0, translation=(0.0, 0.0, 0.0)) -> Part:
     """Rotate a part about z by ``yaw`` rad, then translate it (m)."""
     v, f = part
     return v @ rot_z(yaw).T + np.asarray(translation, dtype=float), f
+
+
+def place_tilted(part: Part, yaw: float, pitch: float, roll: float, translation=(0.0, 0.0, 0.0)) -> Part:
+    """Turn a part by ``yaw`` about z, ``pitch`` about its y and ``roll`` about its x (rad;
+    z-y-x order, pitch positive nose down as in the trajectory), then translate it (m).
+
+    For objects resting on a slope (a parked car's wheels on a grade).
+    """
+    c, s = np.cos(pitch), np.sin(pitch)
+    ry = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    c, s = np.cos(roll), np.sin(roll)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    v, f = part
+    return v @ (rot_z(yaw) @ ry @ rx).T + np.asarray(translation, dtype=float), f
 
 
 def box(size, center=(0.0, 0.0, 0.0), yaw: float = 0.0) -> Part:
@@ -253,6 +268,19 @@ class SmoothField:
         y = np.asarray(y, dtype=float)
         arg = x[..., None] * self.k[:, 0] + y[..., None] * self.k[:, 1] + self.phase
         return np.sin(arg) @ self.amp
+
+    def gradient(self, x, y) -> np.ndarray:
+        """(k,) x, (k,) y, m -> (k, 2) exact slope (d/dx, d/dy), m/m."""
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        arg = x[..., None] * self.k[:, 0] + y[..., None] * self.k[:, 1] + self.phase
+        return np.cos(arg) @ (self.amp[:, None] * self.k)
+
+    def scaled(self, factor: float) -> SmoothField:
+        """A copy whose values and slopes are ``factor`` times this field's."""
+        out = copy.copy(self)
+        out.amp = self.amp * factor
+        return out
 
 
 def wall_strip(points: np.ndarray, z_bottom: np.ndarray, z_top: np.ndarray, closed: bool = False) -> Part:

@@ -43,13 +43,15 @@ class Params(CommonParams):
             raise ValueError("parameter loop_radius_m: the loop does not fit in the land (see size_m)")
 
 
-def random_loop(rng: np.random.Generator, radius_m: float, step_m: float) -> np.ndarray:
-    """(n, 2) a smooth closed loop of mean radius ``radius_m``: a radius with a few
-    random Fourier harmonics (wiggles up to a third of the radius), sampled ``step_m`` apart."""
+def random_loop(rng: np.random.Generator, radius_m: float, step_m: float,
+                wiggle: tuple[float, float] = (0.03, 0.12)) -> np.ndarray:
+    """(n, 2) a smooth closed loop of mean radius ``radius_m``, counter-clockwise: a radius
+    with random Fourier harmonics 2-4, each of relative amplitude drawn from ``wiggle``
+    (by default wiggles up to a third of the radius), sampled ``step_m`` apart."""
     theta = np.linspace(0, 2 * np.pi, 2048, endpoint=False)
     r = np.ones_like(theta)
     for k in (2, 3, 4):
-        r += rng.uniform(0.03, 0.12) * np.cos(k * theta + rng.uniform(0, 2 * np.pi))
+        r += rng.uniform(*wiggle) * np.cos(k * theta + rng.uniform(0, 2 * np.pi))
     pts = radius_m * r[:, None] * np.stack([np.cos(theta), np.sin(theta)], 1)
     return paths.resample(pts, step_m, closed=True)
 

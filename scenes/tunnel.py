@@ -11,6 +11,9 @@ otherwise nothing fixes the position along the axis, the degenerate case.
 
 Metadata: ``interior_s`` (path arc length from the first portal to the
 second, m), ``portal_s``, ``axis_xy`` (unit direction at the tunnel's middle).
+
+Other scenes with a tunnel build it with ``add_bore`` and ``add_fittings`` (a
+``Bore`` describes it) on an alignment sampled ``STEP_M`` apart.
 """
 
 from __future__ import annotations
@@ -85,7 +88,24 @@ def alignment(length_total: float, start_curve: float, curve_len: float, radius:
     return s, np.column_stack([xy, grade * s]), heading
 
 
-def bore_outline(p: Params) -> np.ndarray:
+@dataclass(frozen=True)
+class Bore:
+    """A road tunnel's bore: cross-section, walkways, cover and fittings.
+
+    What a scene with a tunnel in it shares with this one (the canyon's street runs
+    into one). The tunnel's ``Params`` has the same fields, so the functions below
+    take either. Lengths in metres.
+    """
+
+    width_m: float
+    height_m: float
+    cross_section: str = "arch"
+    walkway_width_m: float = 1.0
+    overburden_m: float = 25.0
+    feature_spacing_m: float = 80.0
+
+
+def bore_outline(p: Bore | Params) -> np.ndarray:
     """(k, 2) the lining's cross-section (lateral l, height h), from the left wall's foot
     over the roof to the right wall's foot (so the swept lining faces the axis)."""
     half = p.width_m / 2
@@ -97,52 +117,57 @@ def bore_outline(p: Params) -> np.ndarray:
     return np.vstack([[[half, 0.0]], arch, [[-half, 0.0]]])
 
 
-def build(p: Params) -> Scene:
-    rng = np.random.default_rng([p.seed, 0x7E1])
-    total = 2 * p.approach_m + p.length_m
-    s_in, s_out = p.approach_m, p.approach_m + p.length_m
-    s, centre, heading = alignment(total, s_in, p.length_m, p.curve_radius_m, p.grade_pct / 100, STEP_M)
-    left = np.column_stack([-np.sin(heading), np.cos(heading), np.zeros_like(heading)])
-    mb = MeshBuilder()
-    ground_noise = g.SmoothField(rng, 0.4, (60.0, 250.0))
+def slice_rows(a: float, b: float) -> np.ndarray:
+    """Indices of alignment samples (``STEP_M`` apart from s = 0) spanning [a, b] m every ``SLICE_M``."""
+    k = int(round(SLICE_M / STEP_M))
+    i0, i1 = int(round(a / STEP_M)), int(round(b / STEP_M))
+    return np.unique(np.concatenate([np.arange(i0, i1, k), [i1]]))
+
+
+def section(idx: np.ndarray, lv: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    """(len(idx), len(lv), 2) sweep profile: lateral offsets ``lv`` (k,) with ``heights`` (n, k), m."""
+    return np.stack([np.broadcast_to(lv, (len(idx), len(lv))), heights], -1)
+
+
+def land_laterals(p: Bore | Params, w_land: float = 150.0) -> np.ndarray:
+    """(16,) lateral offsets of the land beside an open road as wide as the bore, one side, m:
+    from the road's edge (half the bore's width + 0.5 m) out to ``w_land``, denser near the road."""
+    return np.geomspace(p.width_m / 2 + 0.5, w_land, 16)
+
+
+def add_open_road(mb: MeshBuilder, centre: np.ndarray, left: np.ndarray, idx: np.ndarray, lat_side: np.ndarray,
+                  land_height, road_obj: int, land_obj: int) -> None:
+    """A road out to ``lat_side[0]`` each side and the land beyond it, over the samples ``idx``.
+
+    centre: (n, 3) centre-line; left: (n, 3) unit left vectors; lat_side: (k,) land laterals
+    (``land_laterals``); land_height: (idx, lv) -> (len(idx), len(lv)) height above the road, m.
+    """
+    edge = lat_side[0]
+    mb.add(*g.sweep(centre[idx], left[idx], np.array([[-edge, 0.0], [edge, 0.0]])), road_obj)
+    for side in (-lat_side[::-1], lat_side):
+        mb.add(*g.sweep(centre[idx], left[idx], section(idx, side, land_height(idx, side))), land_obj)
+
+
+def add_bore(mb: MeshBuilder, p: Bore | Params, s: np.ndarray, centre: np.ndarray, left: np.ndarray,
+             heading: np.ndarray, s_in: float, s_out: float, lat_side: np.ndarray, land_height,
+             road_obj: int) -> None:
+    """The tunnel from ``s_in`` to ``s_out`` m: the hill over it, the portals' cliff faces, the
+    lining, the road inside and the raised walkways (fittings: ``add_fittings``).
+
+    s: (n,) arc length of the alignment samples (``STEP_M`` apart from 0), centre: (n, 3),
+    left: (n, 3), heading: (n,) rad; lat_side and land_height as for ``add_open_road`` (the
+    land around the portals, which the hill rises from and the cliff faces meet).
+    """
     half = p.width_m / 2
     road_half = half - p.walkway_width_m
-    w_land = 150.0  # lateral extent of the land, m
-
-    def rows(a: float, b: float) -> np.ndarray:
-        """Indices of the alignment samples spanning [a, b] every SLICE_M."""
-        k = int(round(SLICE_M / STEP_M))
-        i0, i1 = int(round(a / STEP_M)), int(round(b / STEP_M))
-        return np.unique(np.concatenate([np.arange(i0, i1, k), [i1]]))
-
-    edge = half + 0.5  # the approach road's edge
-    lat_side = np.geomspace(edge, w_land, 16)  # land beside the road, one side
-
-    def land_height(idx, lv):
-        """(len(idx), len(lv)) land height above the road level: a shallow ditch, then rolling land."""
-        xy = centre[idx, None, :2] + lv[None, :, None] * left[idx, None, :2]
-        off_road = np.clip((np.abs(lv) - edge - 2.0) / 10.0, 0.0, 1.0)
-        ditch = np.clip((np.abs(lv) - edge) / 0.5, 0.0, 1.0) * 0.3
-        return ground_noise(xy[..., 0], xy[..., 1]) * off_road[None, :] - ditch[None, :]
+    edge = lat_side[0]
 
     def hill_height(idx, lv):
         return np.maximum(land_height(idx, lv), _hill(s[idx], lv, p, s_in, s_out))
 
-    def section(idx, lv, heights):
-        return np.stack([np.broadcast_to(lv, (len(idx), len(lv))), heights], -1)
-
-    # Approach roads and the land beside them.
-    road_obj = mb.new_object("road")
-    land_obj = mb.new_object("ground")
-    for a, b in ((0.0, s_in), (s_out, total)):
-        idx = rows(a, b)
-        mb.add(*g.sweep(centre[idx], left[idx], np.array([[-edge, 0.0], [edge, 0.0]])), road_obj)
-        for side in (-lat_side[::-1], lat_side):
-            mb.add(*g.sweep(centre[idx], left[idx], section(idx, side, land_height(idx, side))), land_obj)
-
     # The hill over the bore, and the cliff faces at the portals (between the land's and
     # the bore's outline below, and the hill's section above).
-    idx = rows(s_in, s_out)
+    idx = slice_rows(s_in, s_out)
     hill_lat = np.concatenate([-lat_side[::-1], np.linspace(-edge, edge, 5)[1:-1], lat_side])
     hill_prof = section(idx, hill_lat, hill_height(idx, hill_lat))
     mb.add(*g.sweep(centre[idx], left[idx], hill_prof), mb.new_object("ground"))
@@ -180,7 +205,33 @@ def build(p: Params) -> Scene:
                 fwd = np.array([np.cos(heading[end]), np.sin(heading[end]), 0.0])
                 mb.add(v, _orient(v, np.array([[0, 1, 2], [0, 2, 3]]), toward * fwd), walk_obj)
 
-    n_features = _fittings(mb, p, rng, s, centre, left, heading, s_in, s_out)
+
+def build(p: Params) -> Scene:
+    rng = np.random.default_rng([p.seed, 0x7E1])
+    total = 2 * p.approach_m + p.length_m
+    s_in, s_out = p.approach_m, p.approach_m + p.length_m
+    s, centre, heading = alignment(total, s_in, p.length_m, p.curve_radius_m, p.grade_pct / 100, STEP_M)
+    left = np.column_stack([-np.sin(heading), np.cos(heading), np.zeros_like(heading)])
+    mb = MeshBuilder()
+    ground_noise = g.SmoothField(rng, 0.4, (60.0, 250.0))
+    lat_side = land_laterals(p)  # land beside the road, one side
+    edge = lat_side[0]  # the approach road's edge
+
+    def land_height(idx, lv):
+        """(len(idx), len(lv)) land height above the road level: a shallow ditch, then rolling land."""
+        xy = centre[idx, None, :2] + lv[None, :, None] * left[idx, None, :2]
+        off_road = np.clip((np.abs(lv) - edge - 2.0) / 10.0, 0.0, 1.0)
+        ditch = np.clip((np.abs(lv) - edge) / 0.5, 0.0, 1.0) * 0.3
+        return ground_noise(xy[..., 0], xy[..., 1]) * off_road[None, :] - ditch[None, :]
+
+    # Approach roads and the land beside them, then the tunnel.
+    road_obj = mb.new_object("road")
+    land_obj = mb.new_object("ground")
+    for a, b in ((0.0, s_in), (s_out, total)):
+        add_open_road(mb, centre, left, slice_rows(a, b), lat_side, land_height, road_obj, land_obj)
+    add_bore(mb, p, s, centre, left, heading, s_in, s_out, lat_side, land_height, road_obj)
+
+    n_features = add_fittings(mb, p, centre, left, heading, s_in, s_out)
     _approach_furniture(mb, p, rng, s, centre, left, heading, s_in, s_out)
 
     # The path: the right lane, offset from the centre-line.
@@ -215,7 +266,7 @@ def _orient(v: np.ndarray, faces: np.ndarray, direction: np.ndarray) -> np.ndarr
     return faces if n @ direction >= 0 else faces[:, ::-1].copy()
 
 
-def _hill(s: np.ndarray, lv: np.ndarray, p: Params, s_in: float, s_out: float) -> np.ndarray:
+def _hill(s: np.ndarray, lv: np.ndarray, p: Bore | Params, s_in: float, s_out: float) -> np.ndarray:
     """(len(s), len(lv)) height of the hill above the road level; -inf off the hill.
 
     At each portal a headwall 2 m above the bore's crown with steep cut slopes
@@ -233,8 +284,10 @@ def _hill(s: np.ndarray, lv: np.ndarray, p: Params, s_in: float, s_out: float) -
     return np.where(inside[:, None], h, -np.inf)
 
 
-def _fittings(mb, p, rng, s, centre, left, heading, s_in, s_out) -> int:
-    """Lights, emergency cabinets with signs, and jet fans along the bore; returns how many."""
+def add_fittings(mb: MeshBuilder, p: Bore | Params, centre: np.ndarray, left: np.ndarray, heading: np.ndarray,
+                 s_in: float, s_out: float) -> int:
+    """Lights, emergency cabinets with signs, and jet fans along the bore every
+    ``feature_spacing_m``; returns how many sets (arrays as for ``add_bore``)."""
     if p.feature_spacing_m <= 0:
         return 0
     half = p.width_m / 2
