@@ -32,6 +32,7 @@ def add_commands(subparsers) -> None:
     _add_table(sub)
     _add_rejectors(sub)
     _add_ncf(sub)
+    _add_generalize(sub)
     r = subparsers.add_parser(
         "report",
         help="gather an experiment's tables and figures into one HTML or Markdown page",
@@ -116,6 +117,35 @@ def _add_ncf(sub) -> None:
                    help="subsample ICP points per scan (default all; --quick 1500)")
     p.add_argument("--seed", type=int, default=0, help="seed of the subsampling (default 0)")
     p.set_defaults(func=cmd_ncf)
+
+
+def _add_generalize(sub) -> None:
+    p = sub.add_parser(
+        "generalize",
+        help="held-out suite: scene families x sensors x simulated/real-like data, with the peers",
+        description="Run our odometry and the peers (KISS-ICP, GenZ-ICP, small_gicp scan-to-map, when the peer "
+        "extra is installed) on the same in-memory frames of a suite of randomised scene families (city, suburb, "
+        "canyon, tunnel, highway, open, forest), sensors (vlp16, hdl32e, salo32, os1-64, narrow32) and two kinds "
+        "of data: 'simulated' (motion distortion, ring and per-point time given) and 'real' (x y z only, no "
+        "distortion). Parameters are chosen on the tuning seeds; report the evaluation seeds. Per family and "
+        "kind: mean and spread of KITTI t_err, r_err, vertical drift, failures (t_err > 10 %), frames/s.",
+    )
+    p.add_argument("--out", type=Path, help=f"run folder (default {DEFAULT_ROOT}/generalize-SPLIT)")
+    p.add_argument("--split", choices=("tuning", "evaluation"), default="evaluation",
+                   help="seed split (default evaluation; choose parameters on tuning)")
+    p.add_argument("--seeds", help="comma-separated seeds instead of the split's (must not be the other split's)")
+    p.add_argument("--families", help="comma-separated families (default all seven)")
+    p.add_argument("--kinds", default="simulated,real", help="simulated, real or both (default both)")
+    p.add_argument("--methods", help="comma-separated: default, bl, ncf, salo, bl-map, ncf-map, salo-map, kiss-icp, "
+                   "genz-icp, small-gicp (default: default,bl,ncf,salo and the three peers)")
+    p.add_argument("--frames", type=whole_number(20), help="frames per sequence (default 200; --quick 40)")
+    p.add_argument("--workers", type=whole_number(1), default=1, help="sequences run at once (default 1)")
+    p.add_argument("--quick", action="store_true",
+                   help="a small, fast run: 40 frames of city and canyon, one seed, default + bl + kiss-icp")
+    p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override an odometry parameter for our methods (repeatable)")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    p.set_defaults(func=cmd_generalize)
 
 
 # ---------------------------------------------------------------- helpers
@@ -287,6 +317,54 @@ def cmd_ncf(args) -> int:
               f"{r['single_surface_mahalanobis2_median']:.2f} (1.39 = calibrated), within 95 % bound "
               f"{r['single_surface_within_95']:.2f}")
     _finish(record, args.out)
+    return 0
+
+
+def _csv(text: str | None) -> tuple[str, ...]:
+    return tuple(t.strip() for t in (text or "").split(",") if t.strip())
+
+
+def cmd_generalize(args) -> int:
+    from tools.experiments.generalize import (
+        DEFAULT_FRAMES,
+        DEFAULT_METHODS,
+        SPLITS,
+        GeneralizeParams,
+        method_label,
+        run_generalize,
+        write_generalize,
+    )
+    from tools.experiments.records import RunRecord
+
+    try:
+        seeds = tuple(int(s) for s in _csv(args.seeds))
+    except ValueError:
+        raise _error(f"--seeds {args.seeds!r}: expected whole numbers, e.g. 1,2") from None
+    quick = args.quick
+    try:
+        params = GeneralizeParams(
+            split=args.split,
+            seeds=seeds or ((SPLITS[args.split][0],) if quick else ()),
+            families=_csv(args.families) or (("city", "canyon") if quick else ()),
+            kinds=_csv(args.kinds),
+            methods=_csv(args.methods) or (("default", "bl", "kiss-icp") if quick else DEFAULT_METHODS),
+            frames=args.frames or (40 if quick else DEFAULT_FRAMES),
+            config_overrides=_config_overrides(args.config_set),
+            **({"segment_lengths_m": (10.0, 20.0)} if quick else {}),
+        )
+        params.sequences()  # unknown families fail here, before anything is written
+    except ValueError as exc:
+        raise _error(str(exc)) from None
+    out = args.out or DEFAULT_ROOT / f"generalize-{args.split}"
+    record = RunRecord(out, "generalize", params.to_dict(), _command_line()).start()
+    results = run_generalize(params, record=record, workers=args.workers, progress=args.progress)
+    rows = write_generalize(results, params, record)
+    for r in rows:
+        if r["family"] == "all":
+            print(f"{r['kind']:9s} {method_label(r['method']):15s} t_err {r['t_err_pct_mean']:7.3f} "
+                  f"± {r['t_err_pct_std']:.3f} %  failures {r['failures']}/{r['ran']}  "
+                  f"{r['frames_per_second_mean']:.1f} frames/s")
+    _finish(record, out)
     return 0
 
 

@@ -16,9 +16,11 @@ from pathlib import Path
 import numpy as np
 
 METHOD_COLORS = {"ground truth": "black", "BL": "tab:blue", "NCF": "tab:orange", "SALO": "tab:green",
-                 "KISS-ICP": "tab:purple"}
+                 "KISS-ICP": "tab:purple", "default": "tab:red", "BL map": "tab:cyan", "NCF map": "tab:olive",
+                 "SALO map": "tab:pink", "GenZ-ICP": "tab:brown", "small_gicp s2m": "tab:gray"}
 # Widths and dashes differ so that methods whose tracks coincide stay visible under each other.
-METHOD_STYLES = {"BL": ("-", 3.4), "NCF": ("--", 2.2), "SALO": ("-", 1.2), "KISS-ICP": (":", 2.2)}
+METHOD_STYLES = {"BL": ("-", 3.4), "NCF": ("--", 2.2), "SALO": ("-", 1.2), "KISS-ICP": (":", 2.2),
+                 "default": ("-", 2.6), "GenZ-ICP": ("-.", 1.6), "small_gicp s2m": (":", 1.6)}
 REJECTOR_COLORS = {"distance": "tab:blue", "gcr": "tab:green"}
 TARGET_HATCH = {"filtered": "", "raw": "///"}
 # Log-scale plots show errors below this as this (exact zeros have no logarithm).
@@ -458,3 +460,41 @@ def _noise_colors(noises) -> dict:
     """A distinct, dark-enough colour per noise level (sequential maps fade to white at one end)."""
     palette = ["#1b4f9c", "#d95f02", "#1b9e77", "#7570b3", "#e7298a", "#66a61e", "#a6761d", "#444444"]
     return {v: palette[i % len(palette)] for i, v in enumerate(noises)}
+
+
+def family_error_plot(path, results: list[dict], methods: tuple[str, ...], label, failure_pct: float) -> Path:
+    """KITTI t_err per scene family and method, one panel per data kind (log scale).
+
+    results: the generalisation suite's per-sequence results; a bar is the mean over the
+    family's sequences, each dot one sequence; the dashed line is the failure threshold.
+    """
+    kinds = sorted({r["sequence"]["kind"] for r in results})
+    families = sorted({r["sequence"]["family"] for r in results})
+    fig = _figure(figsize=(max(8.0, 1.25 * len(families) * max(1, len(methods)) / 3), 3.6 * len(kinds) + 1.0))
+    axes = np.atleast_1d(fig.subplots(len(kinds), 1, sharex=True))
+    width = 0.8 / max(len(methods), 1)
+    for ax, kind in zip(axes, kinds, strict=True):
+        for j, m in enumerate(methods):
+            name = label(m)
+            xs, means = [], []
+            for i, fam in enumerate(families):
+                vals = [r["methods"][m]["t_err_pct"] for r in results
+                        if r["sequence"]["family"] == fam and r["sequence"]["kind"] == kind
+                        and r["methods"].get(m, {}).get("ok")]
+                vals = np.clip(np.nan_to_num(np.array(vals, dtype=float), nan=1e3, posinf=1e3), 1e-3, 1e3)
+                x = i - 0.4 + (j + 0.5) * width
+                if len(vals):
+                    xs.append(x)
+                    means.append(float(np.mean(vals)))
+                    ax.plot(np.full(len(vals), x), vals, "o", ms=3, color="black", alpha=0.6, zorder=3)
+            ax.bar(xs, means, width=width * 0.95, color=METHOD_COLORS.get(name), label=name, alpha=0.85)
+        ax.axhline(failure_pct, color="0.3", ls="--", lw=1)
+        ax.set_yscale("log")
+        _plain_log_ticks(ax, "y")
+        ax.set_ylabel("KITTI t_err, %")
+        ax.set_title(f"as {kind}: bars = mean over the family's sequences, dots = sequences, dashed = failure")
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[-1].set_xticks(range(len(families)), families)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 5), fontsize=9)
+    return save_png(fig, path)

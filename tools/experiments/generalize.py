@@ -1,0 +1,449 @@
+"""Generalisation: odometry on worlds, sensors and data kinds its defaults were not chosen on.
+
+The suite. Scene *families* (``scenes.families``: city, suburb, canyon, tunnel,
+highway, open, forest), each drawn with randomised parameters from a seed; the
+sensors vlp16, hdl32e, salo32, os1-64 and narrow32 rotate over the families and
+seeds (every family and every sensor appear, not every combination); the range
+noise is drawn per sequence between 1 and 3 cm, and the start along the path
+between a standing start and 12 s in (so many sequences start at speed). Every
+(family, seed) is run in two kinds:
+
+- "simulated": motion distortion on, per-point ring and time given to the methods;
+- "real": no motion distortion and no per-point fields (x, y, z only), as real
+  KITTI scans: rings from the elevation, nothing to de-skew with.
+
+Seeds are split in the code: parameters are chosen on ``TUNING_SEEDS`` and
+the figures reported are those of ``EVALUATION_SEEDS``; the two never overlap.
+
+Per sequence every method runs on the same in-memory frames
+(``simlidar.in_memory``), in one worker process: our variants (the default
+configuration of ``salo odometry``, the paper's scan-to-scan BL / NCF / SALO,
+their scan-to-map twins) and the peers (``tools.experiments.peer``: KISS-ICP,
+GenZ-ICP, a small_gicp scan-to-map pipeline) when installed. Figures per
+method: KITTI t_err (%) and r_err (deg/100 m) over segments of
+``SEGMENT_LENGTHS_M`` (the sequences are 100-500 m long, shorter than KITTI's
+800 m), the vertical drift (end-point height error over the distance
+travelled, %), failure (t_err > 10 %), frames/s. Per family and kind: mean and
+spread (standard deviation over the sequences) of each.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import zlib
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .records import RunRecord, fmt, markdown_table, write_csv, write_json
+
+log = logging.getLogger(__name__)
+
+SENSORS = ("vlp16", "hdl32e", "salo32", "os1-64", "narrow32")
+KINDS = ("simulated", "real")
+TUNING_SEEDS = (101, 102, 103)
+EVALUATION_SEEDS = (1, 2)
+SPLITS = {"tuning": TUNING_SEEDS, "evaluation": EVALUATION_SEEDS}
+DEFAULT_FRAMES = 200
+SEGMENT_LENGTHS_M = (50.0, 100.0, 150.0, 200.0)
+FAILURE_T_ERR_PCT = 10.0
+MAX_START_S = 12.0
+# Families with a tunnel start where the portal comes at this fraction of the sequence
+# (the canyon's street then its tunnel; mostly inside for the tunnel), whatever the start drawn.
+PORTAL_AT_FRACTION = {"canyon": 0.5, "tunnel": 0.2}
+NOISE_RANGE_M = (0.01, 0.03)
+
+OUR_METHODS = ("default", "bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
+PEER_METHODS = ("kiss-icp", "genz-icp", "small-gicp")
+DEFAULT_METHODS = ("default", "bl", "ncf", "salo", *PEER_METHODS)
+
+
+@dataclass(frozen=True)
+class SuiteSequence:
+    """One sequence of the suite: a family drawn with a seed, a sensor, a kind of data.
+
+    noise_std_m: range noise (1 sigma), m. start_s: time along the path of the first sweep, s
+    (families in ``PORTAL_AT_FRACTION``: None, the start is placed by the portal).
+    """
+
+    family: str
+    seed: int
+    sensor: str
+    kind: str
+    frames: int
+    noise_std_m: float
+    start_s: float | None
+
+    @property
+    def name(self) -> str:
+        return f"{self.family}-{self.seed}-{self.sensor}-{self.kind}"
+
+
+def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
+          kinds: tuple[str, ...] = KINDS) -> list[SuiteSequence]:
+    """The suite's sequences for ``seeds``: every family x seed x kind, the sensor rotating.
+
+    The sensor of the i-th (family, seed) pair is ``SENSORS[i % 5]`` shifted by the
+    first seed, so a split of two seeds over seven families uses every sensor at
+    least twice. Noise and start are drawn from the (family, seed) pair.
+    """
+    from scenes.families import FAMILIES
+
+    families = tuple(families or FAMILIES)
+    out = []
+    for fi, family in enumerate(families):
+        for si, seed in enumerate(seeds):
+            rng = np.random.default_rng([zlib.crc32(family.encode()), int(seed), 0x6E4])
+            sensor = SENSORS[(fi * len(seeds) + si + seeds[0]) % len(SENSORS)]
+            noise = round(float(rng.uniform(*NOISE_RANGE_M)), 4)
+            start = round(float(rng.choice([0.0, rng.uniform(2.0, MAX_START_S)])), 2)
+            if family in PORTAL_AT_FRACTION:
+                start = None
+            out.extend(SuiteSequence(family, int(seed), sensor, kind, frames, noise, start) for kind in kinds)
+    return out
+
+
+def simulate(seq: SuiteSequence, progress=None):
+    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
+    from scenes import build_scene
+    from scenes.families import draw_family_params, family_scene
+    from simlidar.in_memory import simulate_in_memory
+    from simlidar.sensor import load_sensor
+    from simlidar.world import World
+
+    scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
+    world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, f"scene:{scene.name}")
+    sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
+    span = seq.frames * sensor.sweep_period_s
+    start = seq.start_s
+    if start is None:
+        portal = float(scene.trajectory.time_at_distance(scene.metadata["interior_s"][0])[0])
+        start = float(np.clip(portal - PORTAL_AT_FRACTION[seq.family] * span, 0.0, scene.trajectory.duration_s - span))
+    available = int((scene.trajectory.duration_s - start) / sensor.sweep_period_s)
+    if seq.frames > available:
+        raise ValueError(f"{seq.name}: the path has room for {available} sweeps after {start:.1f} s, "
+                         f"not {seq.frames}")
+    return simulate_in_memory(world, scene.trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
+                              fields=seq.kind, name=seq.name, on_frame=progress)
+
+
+# ---------------------------------------------------------------- methods
+def odometry_config(method: str, overrides: dict):
+    """The odometry config a method name stands for (``default``: what ``salo odometry`` uses)."""
+    from odometry.config import DEFAULT_VARIANT, variant
+
+    return variant(DEFAULT_VARIANT if method == "default" else method).replace(**overrides)
+
+
+@dataclass
+class MethodRun:
+    """One method on one sequence: poses (F, 4, 4) or why there are none, and its figures."""
+
+    method: str
+    ok: bool
+    note: str = ""
+    poses: np.ndarray | None = None
+    frames_per_second: float = float("nan")
+    metrics: dict = field(default_factory=dict)
+    flags: dict = field(default_factory=dict)
+
+
+def run_method(method: str, sequence, overrides: dict) -> MethodRun:
+    """Run ``method`` over every frame of ``sequence`` (a peer that is missing or fails: ``ok=False``)."""
+    from odometry.pipeline import run_sequence
+
+    from . import peer
+
+    if method in PEER_METHODS:
+        why = peer.peer_unavailable_reason(method)
+        if why:
+            return MethodRun(method, False, why)
+        cfg = odometry_config("default", overrides)
+        try:
+            run = peer.run_peer(method, sequence, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
+        except Exception as exc:  # noqa: BLE001 - a peer failing must not end the suite; the row says why
+            log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
+            return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
+        return MethodRun(method, True, f"{method} {peer.peer_version(method)}", run.poses, run.frames_per_second)
+    run = run_sequence(sequence, odometry_config(method, overrides))
+    d = run.diagnostics
+    flags = {"extrapolated": sum(x.extrapolated for x in d), "degenerate": sum(x.degenerate for x in d),
+             "remapped_frames": sum(x.remapped > 0 for x in d)}
+    return MethodRun(method, True, run.config.name, run.poses, run.frames_per_second, flags=flags)
+
+
+def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
+    """t_err %, r_err deg/100 m (KITTI protocol over segments of ``lengths_m``), vertical drift %,
+    ATE (aligned, m), RPE per frame (cm, deg), path length (m)."""
+    from odometry.metrics import evaluate_trajectory, trajectory_distances
+
+    if not np.all(np.isfinite(est)):
+        return {"t_err_pct": float("inf"), "diverged": True}
+    m = evaluate_trajectory(gt, est, lengths_m=lengths_m)
+    dist = trajectory_distances(gt)
+    length = float(dist[-1])
+    return {
+        "t_err_pct": m.t_err_pct, "r_err_deg_per_100m": m.r_err_deg_per_100m,
+        "vertical_drift_pct": 100.0 * float(est[-1, 2, 3] - gt[-1, 2, 3]) / length if length > 0 else float("nan"),
+        "ate_aligned_m": m.ate_aligned_rmse_m, "rpe_t_cm": 100.0 * m.rpe.t_stats_m.mean,
+        "rpe_r_deg": m.rpe.r_stats_deg.mean, "path_length_m": length, "diverged": False,
+    }
+
+
+def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: dict,
+                      lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
+    """Simulate one suite sequence and run every method on it (a worker's task). JSON-able except poses."""
+    t0 = time.perf_counter()
+    try:
+        sequence = simulate(seq)
+    except Exception as exc:  # noqa: BLE001 - one bad draw must not end the suite; its row says why
+        log.warning("%s: simulation failed: %s", seq.name, exc)
+        return {"sequence": asdict(seq), "name": seq.name, "error": f"{type(exc).__name__}: {exc}", "methods": {}}
+    sim_s = time.perf_counter() - t0
+    gt = sequence.poses
+    t_eig0 = np.array([d.translation_eigenvalues[0] for d in sequence.degeneracy])
+    out = {"sequence": asdict(seq) | {"start_s": sequence.manifest["t_start_s"]}, "name": seq.name,
+           "simulate_s": sim_s, "gt": gt,
+           "t_eig0_median": float(np.median(t_eig0)), "t_eig0_min": float(np.min(t_eig0)), "methods": {}}
+    for method in methods:
+        run = run_method(method, sequence, overrides)
+        res = {"ok": run.ok, "note": run.note, "frames_per_second": run.frames_per_second, "flags": run.flags}
+        if run.ok:
+            res.update(trajectory_figures(gt, run.poses, lengths_m))
+            res["failed"] = bool(res["diverged"] or res["t_err_pct"] > FAILURE_T_ERR_PCT)
+            res["poses"] = run.poses
+        out["methods"][method] = res
+        log.info("%s %s: %s", seq.name, method,
+                 f"t_err {res.get('t_err_pct', float('nan')):.3f} %, {run.frames_per_second:.1f} frames/s"
+                 if run.ok else run.note)
+    return out
+
+
+# ---------------------------------------------------------------- the experiment
+@dataclass(frozen=True)
+class GeneralizeParams:
+    """split: "tuning" or "evaluation" (or explicit ``seeds``). families, kinds, methods, frames:
+    what runs. config_overrides: odometry parameters changed for every one of our methods."""
+
+    split: str = "evaluation"
+    seeds: tuple[int, ...] = ()
+    families: tuple[str, ...] = ()
+    kinds: tuple[str, ...] = KINDS
+    methods: tuple[str, ...] = DEFAULT_METHODS
+    frames: int = DEFAULT_FRAMES
+    config_overrides: tuple[tuple[str, object], ...] = ()
+    segment_lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M
+
+    def __post_init__(self) -> None:
+        if self.split not in SPLITS and not self.seeds:
+            raise ValueError(f"split must be one of {', '.join(SPLITS)} (or give seeds), got {self.split!r}")
+        if self.seeds and self.split in SPLITS:
+            other = set(self.seeds) & set(SPLITS["evaluation" if self.split == "tuning" else "tuning"])
+            if other:
+                raise ValueError(f"seeds {sorted(other)} belong to the other split")
+        unknown = [m for m in self.methods if m not in OUR_METHODS + PEER_METHODS]
+        if unknown:
+            raise ValueError(f"unknown method {unknown[0]!r} (known: {', '.join(OUR_METHODS + PEER_METHODS)})")
+        bad_kind = [k for k in self.kinds if k not in KINDS]
+        if bad_kind:
+            raise ValueError(f"unknown kind {bad_kind[0]!r} (known: {', '.join(KINDS)})")
+
+    @property
+    def seed_list(self) -> tuple[int, ...]:
+        return tuple(self.seeds) or SPLITS[self.split]
+
+    def sequences(self) -> list[SuiteSequence]:
+        return suite(self.seed_list, self.frames, tuple(self.families) or None, tuple(self.kinds))
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["seeds"] = list(self.seed_list)
+        d["config_overrides"] = dict(self.config_overrides)
+        return d
+
+
+def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, workers: int = 1,
+                   progress: bool = False) -> list[dict]:
+    """Run the suite, ``workers`` sequences at a time; with ``record``, write each sequence's poses as it ends."""
+    from tqdm import tqdm
+
+    seqs = params.sequences()
+    overrides = dict(params.config_overrides)
+    results = []
+    bar = tqdm(total=len(seqs), unit="sequence", desc="generalize", disable=not progress, dynamic_ncols=True)
+
+    def done(res: dict) -> None:
+        results.append(res)
+        if record is not None:
+            _write_poses(record, res)
+        bar.update(1)
+        bar.set_postfix_str(res["name"])
+
+    if workers <= 1:
+        for seq in seqs:
+            done(run_sequence_task(seq, params.methods, overrides, params.segment_lengths_m))
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(run_sequence_task, seq, params.methods, overrides, params.segment_lengths_m)
+                       for seq in seqs]
+            for f in as_completed(futures):
+                done(f.result())
+    bar.close()
+    order = {s.name: i for i, s in enumerate(seqs)}
+    return sorted(results, key=lambda r: order[r["name"]])
+
+
+def _write_poses(record: RunRecord, res: dict) -> None:
+    from odometry.pipeline import write_kitti_poses
+
+    if "gt" in res:
+        write_kitti_poses(record.path(f"poses/{res['name']}/gt.txt"), res["gt"])
+    for m, r in res["methods"].items():
+        if r.get("poses") is not None:
+            write_kitti_poses(record.path(f"poses/{res['name']}/{m}.txt"), r["poses"])
+
+
+# ---------------------------------------------------------------- summaries
+FIGURES = ("t_err_pct", "r_err_deg_per_100m", "vertical_drift_pct", "frames_per_second")
+
+
+def summarize(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
+    """Per (family, kind, method): mean and standard deviation over the sequences of each figure,
+    failures, and how many sequences ran. Also (family "all") over every family."""
+    rows = []
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in results:
+        s = r["sequence"]
+        groups.setdefault((s["family"], s["kind"]), []).append(r)
+        groups.setdefault(("all", s["kind"]), []).append(r)
+    for (family, kind), rs in groups.items():
+        for m in methods:
+            runs = [r["methods"].get(m, {}) for r in rs]
+            ok = [x for x in runs if x.get("ok")]
+            row = {"family": family, "kind": kind, "method": m, "sequences": len(rs), "ran": len(ok),
+                   "failures": sum(x["failed"] for x in ok),
+                   "note": next((x.get("note", "") for x in runs if not x.get("ok")), "")}
+            for f in FIGURES:
+                v = np.array([x.get(f, np.nan) for x in ok], dtype=float)
+                v = v[np.isfinite(v)]
+                if f == "vertical_drift_pct":
+                    v = np.abs(v)
+                row[f"{f}_mean"] = float(v.mean()) if len(v) else float("nan")
+                row[f"{f}_std"] = float(v.std()) if len(v) else float("nan")
+            rows.append(row)
+    return rows
+
+
+def method_label(m: str) -> str:
+    return {"default": "default", "bl": "BL", "ncf": "NCF", "salo": "SALO", "bl-map": "BL map",
+            "ncf-map": "NCF map", "salo-map": "SALO map", "kiss-icp": "KISS-ICP", "genz-icp": "GenZ-ICP",
+            "small-gicp": "small_gicp s2m"}.get(m, m)
+
+
+def table_markdown(rows: list[dict], methods: tuple[str, ...], figure: str = "t_err_pct", spec: str = ".2f") -> str:
+    """Rows family x kind, a column per method: ``mean +- std`` of ``figure`` (failures marked), best in bold."""
+    header = ["family", "kind", *(method_label(m) for m in methods)]
+    keys = sorted({(r["family"], r["kind"]) for r in rows}, key=lambda k: (k[0] == "all", k[0], k[1]))
+    by = {(r["family"], r["kind"], r["method"]): r for r in rows}
+    out = []
+    for fam, kind in keys:
+        cells = []
+        means = [by[(fam, kind, m)][f"{figure}_mean"] for m in methods if (fam, kind, m) in by]
+        finite = [v for v in means if math.isfinite(v)]
+        best = min(finite) if finite and figure != "frames_per_second" else (max(finite) if finite else None)
+        for m in methods:
+            r = by.get((fam, kind, m))
+            if r is None or not r["ran"]:
+                cells.append("n/a")
+                continue
+            mu, sd = r[f"{figure}_mean"], r[f"{figure}_std"]
+            cell = f"{fmt(mu, spec)} ± {fmt(sd, spec)}"
+            if best is not None and math.isfinite(mu) and mu == best:
+                cell = f"**{cell}**"
+            if r["failures"]:
+                cell += f" ({r['failures']}/{r['ran']} failed)"
+            cells.append(cell)
+        out.append([fam, kind, *cells])
+    return markdown_table(header, out)
+
+
+def write_generalize(results: list[dict], params: GeneralizeParams, record: RunRecord) -> list[dict]:
+    """results.json, per-sequence and summary CSV, summary.md and the plots into the run folder."""
+    from . import plots
+
+    methods = params.methods
+    rows = summarize(results, methods)
+    per_seq = []
+    for r in results:
+        for m, x in r["methods"].items():
+            per_seq.append({"sequence": r["name"], **r["sequence"], "method": m,
+                            "t_eig0_median": r.get("t_eig0_median"),
+                            **{k: v for k, v in x.items() if k not in ("poses", "flags")}, **x.get("flags", {})})
+    cols = ["sequence", "family", "seed", "sensor", "kind", "frames", "noise_std_m", "start_s", "t_eig0_median",
+            "method", "ok", "note", "t_err_pct", "r_err_deg_per_100m", "vertical_drift_pct", "ate_aligned_m",
+            "rpe_t_cm", "rpe_r_deg", "path_length_m", "failed", "frames_per_second", "extrapolated", "degenerate",
+            "remapped_frames"]
+    write_csv(record.path("sequences.csv"), per_seq, cols)
+    write_csv(record.path("summary.csv"), rows, ["family", "kind", "method", "sequences", "ran", "failures", "note"]
+              + [f"{f}_{s}" for f in FIGURES for s in ("mean", "std")])
+    write_json(record.path("results.json"), {
+        "experiment": "generalize", "params": params.to_dict(), "summary": rows,
+        "sequences": [{k: v for k, v in r.items() if k != "gt"} | {"methods": {
+            m: {k: v for k, v in x.items() if k != "poses"} for m, x in r["methods"].items()}} for r in results],
+    })
+    errors = [r for r in results if r.get("error")]
+    lines = [f"# Generalisation suite: {params.split} seeds {list(params.seed_list)}", "",
+             f"{len(results)} sequences ({len(results) - len(errors)} simulated), {params.frames} frames each; "
+             f"families {', '.join(sorted({r['sequence']['family'] for r in results}))}; kinds "
+             f"{', '.join(params.kinds)}. KITTI t_err over "
+             f"{', '.join(f'{v:g}' for v in params.segment_lengths_m)} m "
+             f"segments; mean ± standard deviation over the sequences of each family; "
+             f"failed: t_err > {FAILURE_T_ERR_PCT:g} %.", ""]
+    if params.config_overrides:
+        lines += ["Odometry parameters changed for our methods: "
+                  + ", ".join(f"`{k}: {v}`" for k, v in params.config_overrides) + ".", ""]
+    from odometry.config import DEFAULT_VARIANT
+
+    lines += [f"`default` is `salo odometry`'s default configuration, the variant `{DEFAULT_VARIANT}`.", ""]
+    for figure, title, spec in (("t_err_pct", "KITTI t_err, %", ".2f"),
+                                ("r_err_deg_per_100m", "KITTI r_err, deg / 100 m", ".3f"),
+                                ("vertical_drift_pct", "vertical drift |dz| / distance, %", ".2f"),
+                                ("frames_per_second", "frames / s", ".1f")):
+        lines += [f"## {title}", "", table_markdown(rows, methods, figure, spec), ""]
+    for r in errors:
+        lines.append(f"- {r['name']}: not simulated ({r['error']})")
+    unavailable = {m: x["note"] for r in results for m, x in r["methods"].items() if not x.get("ok")}
+    for m, note in unavailable.items():
+        lines.append(f"- {method_label(m)}: {note}")
+    lines += ["", "## Per sequence", "", "![t_err per family](t_err_per_family.png)", "",
+              "![trajectories](trajectories.png)", ""]
+    header = ["sequence", "sensor", "noise, cm", "start, s", "t_eig0 median", *(method_label(m) for m in methods)]
+    body = []
+    for r in results:
+        s = r["sequence"]
+        cells = []
+        for m in methods:
+            x = r["methods"].get(m, {})
+            cells.append("n/a" if not x.get("ok") else fmt(x.get("t_err_pct"), ".2f") + (" ✗" if x.get("failed")
+                                                                                         else ""))
+        body.append([r["name"], s["sensor"], fmt(100 * s["noise_std_m"], ".1f"), fmt(s["start_s"], ".1f"),
+                     fmt(r.get("t_eig0_median"), ".4f"), *cells])
+    lines.append(markdown_table(header, body))
+    record.write_text("summary.md", "\n".join(lines) + "\n")
+    plots.family_error_plot(record.path("t_err_per_family.png"), results, methods, method_label,
+                            FAILURE_T_ERR_PCT)
+    tracks = []
+    for r in results:
+        if "gt" not in r:
+            continue
+        est = {method_label(m): x["poses"] for m, x in r["methods"].items() if x.get("ok")}
+        errs = {method_label(m): (x["t_err_pct"], 0.0) for m, x in r["methods"].items() if x.get("ok")}
+        tracks.append((r["name"], r["gt"], est, errs))
+    if tracks:
+        plots.trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=100.0)
+    return rows
