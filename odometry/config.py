@@ -74,6 +74,9 @@ class OdometryConfig:
         map_max_distance_m: map points farther than this from the sensor are dropped
             (None: ``max_range_m``).
         max_correspondence_distance_m: the distance rejector.
+        initial_correspondence_distance_m: the bound of a coarse registration, without
+            trimming, before the first one (which has no motion to extrapolate: at 10-30 m/s
+            the sensor moves 1-3 m per frame).
         trim_fraction: drop this fraction of the largest distances (paper: 0.2).
         gcr: apply the geometric correspondence rejector.
         gcr_formula: "beam" (the neighbour beam's hit on the surface, as the paper's
@@ -122,6 +125,7 @@ class OdometryConfig:
     map_points_per_voxel: int = 20
     map_max_distance_m: float | None = None
     max_correspondence_distance_m: float = 1.0
+    initial_correspondence_distance_m: float = 3.0
     trim_fraction: float = 0.2
     gcr: bool = True
     gcr_formula: str = "beam"
@@ -142,7 +146,8 @@ class OdometryConfig:
             raise ConfigError(f"odometry config '{self.name}': key '{key}' {problem}")
 
         positive = ("voxel_size_m", "ncf_point_noise_std_m", "ncf_max_normal_std_deg", "max_range_m",
-                    "max_correspondence_distance_m", "abs_translation_tol_m", "abs_rotation_tol_deg",
+                    "max_correspondence_distance_m", "initial_correspondence_distance_m",
+                    "abs_translation_tol_m", "abs_rotation_tol_deg",
                     "max_prediction_error_m", "max_prediction_error_deg", "map_voxel_size_m", "rotation_scale_m")
         for key in positive:
             v = getattr(self, key)

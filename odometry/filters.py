@@ -24,15 +24,18 @@ from .constraints import restore_constraints
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import estimate_normals
 
-_tree_builders: dict[int, ThreadPoolExecutor] = {}
+_background: dict[int, ThreadPoolExecutor] = {}
 
 
-def _tree_builder() -> ThreadPoolExecutor:
-    """This process's background thread for k-d tree builds (a forked child gets its own)."""
+def background() -> ThreadPoolExecutor:
+    """This process's background thread for k-d tree builds (a forked child gets its own).
+
+    Builds release the GIL, so they run on a second core beside numpy work on the first.
+    """
     pid = os.getpid()
-    if pid not in _tree_builders:
-        _tree_builders[pid] = ThreadPoolExecutor(max_workers=1, thread_name_prefix="raw-kdtree")
-    return _tree_builders[pid]
+    if pid not in _background:
+        _background[pid] = ThreadPoolExecutor(max_workers=1, thread_name_prefix="kdtree")
+    return _background[pid]
 
 
 def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray | None = None):
@@ -121,7 +124,7 @@ def filter_scan(
     t = time.perf_counter()
     # The raw k-d tree (for the normals) is built on a second core while this one
     # computes the voxel grid: both release the GIL, and the two take about as long.
-    building = _tree_builder().submit(cKDTree, raw_points, balanced_tree=False, compact_nodes=False)
+    building = background().submit(cKDTree, raw_points, balanced_tree=False, compact_nodes=False)
     if raw_times_s is None:
         centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m), None
     else:

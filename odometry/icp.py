@@ -140,14 +140,14 @@ def register(
 
     Matches whose target has no plane (a nan normal: a map point on a line or a
     corner) are dropped before the rejectors. The steps are linearised about the
-    sensor's initial position in the target frame, not the target frame's origin
+    previous sensor position in the target frame, not the target frame's origin
     (a map's origin can be hundreds of metres away, where a small rotation is a
     large translation); with ``min_constraint_eigenvalue`` the directions the
     matches constrain too weakly keep ``T_init``'s value (``odometry.constraints``).
     """
     rejectors = rejectors_for(config) if rejectors is None else rejectors
     T = np.array(T_init, dtype=float)
-    centre = T[:3, 3].copy()
+    centre = np.zeros(3) if T_target_previous is None else np.array(T_target_previous[:3, 3], dtype=float)
     res = RegistrationResult(T_target_source=T.copy())
     seconds = {"match": 0.0, "reject": 0.0, "estimate": 0.0}
     # The distance rejector's bound also limits the k-d tree search.

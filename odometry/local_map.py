@@ -17,24 +17,25 @@ its size is bounded by the volume, not the time); points farther than
 ``max_distance_m`` from the sensor are dropped. A target normal is the PCA
 normal of the target point's ``normal_neighbours`` nearest map points, computed
 only for points that are matched, and only where the neighbourhood is a plane:
-its second axis must be resolved above the noise (the significance test of
-``odometry.ncf``, with isotropic noise of the sensor's range sigma) and its
-curvature below ``max_curvature``. Other targets get a nan normal: the ICP drops
-those matches (a line or a corner does not define a plane).
+it must extend along its second axis well beyond the range noise (points of
+one scan line do not define a plane) and its curvature be below
+``max_curvature``. Other targets get a nan normal: the ICP drops those matches
+(a line or a corner does not define a plane).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .filters import background
 from .icp import Target
-from .ncf import DEFAULT_GAP_SIGNIFICANCE_Z
 from .normals import estimate_normals
 
+# A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis.
+MIN_PLANE_EXTENT_SIGMAS = 3.0
 _KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
 _KEY_MASK = (1 << _KEY_BITS) - 1
@@ -57,6 +58,20 @@ def neighbourhood_keys(keys: np.ndarray) -> np.ndarray:
     return np.unique((keys[:, None] + _NEIGHBOUR_OFFSETS[None, :]).ravel())
 
 
+def voxel_centres(keys: np.ndarray, voxel_size_m: float) -> np.ndarray:
+    """(K,) voxel keys -> (K, 3) centres of the voxels, m."""
+    ijk = np.stack([(keys >> (2 * _KEY_BITS)) & _KEY_MASK, (keys >> _KEY_BITS) & _KEY_MASK, keys & _KEY_MASK], axis=1)
+    return (ijk - _KEY_OFFSET + 0.5) * voxel_size_m
+
+
+def in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """(N,) bool: which ``values`` are in the sorted array ``sorted_set`` (faster than np.isin here)."""
+    if len(sorted_set) == 0:
+        return np.zeros(len(values), dtype=bool)
+    pos = np.minimum(np.searchsorted(sorted_set, values), len(sorted_set) - 1)
+    return sorted_set[pos] == values
+
+
 def rank_within_groups(sorted_keys: np.ndarray) -> np.ndarray:
     """(N,) 0, 1, 2, ... counting up within each run of equal values of a sorted array."""
     n = len(sorted_keys)
@@ -69,21 +84,20 @@ def rank_within_groups(sorted_keys: np.ndarray) -> np.ndarray:
 
 
 def plane_normals_valid(estimate, noise_std_m: float, max_curvature: float,
-                        significance_z: float = DEFAULT_GAP_SIGNIFICANCE_Z) -> np.ndarray:
+                        min_extent_sigmas: float = MIN_PLANE_EXTENT_SIGMAS) -> np.ndarray:
     """(M,) bool: the neighbourhoods of a ``NormalEstimate`` define a plane.
 
-    The second axis must stand out of the noise: the eigen-gap ``s_1^2 - s_2^2`` of
-    the scatter must exceed ``significance_z`` standard deviations of what isotropic
-    noise of ``noise_std_m`` alone gives along it (``odometry.ncf._resolved_gaps``,
-    with ``N = (k - 1) sigma^2 I``), and the PCL curvature must be at most ``max_curvature``.
+    A plane needs two axes: the neighbourhood's standard deviation along its second
+    axis must exceed ``min_extent_sigmas`` range-noise sigmas. Points of one scan
+    line (one ring on the ground) spread across the line only by their noise, and
+    their "normal" is then perpendicular to the beams, not to the surface. And the
+    PCL curvature must be at most ``max_curvature`` (not a corner, not foliage).
     """
-    k = estimate.k
-    lam = estimate.scatter_eigenvalues
-    margin = significance_z * math.sqrt(2.0 / max(k - 1, 1)) * (k - 1) * noise_std_m**2
+    lam = estimate.scatter_eigenvalues / estimate.k  # variances along the axes, m^2
     with np.errstate(invalid="ignore"):
-        planar = (lam[:, 1] - lam[:, 2]) > margin
+        wide = lam[:, 1] > (min_extent_sigmas * noise_std_m) ** 2
         flat = estimate.curvature <= max_curvature
-    return planar & flat & np.isfinite(estimate.normals).all(axis=1)
+    return wide & flat & np.isfinite(estimate.normals).all(axis=1)
 
 
 @dataclass
@@ -124,6 +138,7 @@ class LocalMap:
         self._known = np.zeros(0, dtype=bool)
         self._voxel_keys = np.zeros(0, dtype=np.int64)  # sorted occupied voxels
         self._voxel_counts = np.zeros(0, dtype=np.int64)
+        self._tree = background().submit(cKDTree, self.points)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -133,9 +148,14 @@ class LocalMap:
         return len(self.points) == 0
 
     def update(self, points_world: np.ndarray, sensor_position_m: np.ndarray) -> MapStats:
-        """Add (N, 3) world points where their voxels have room, then drop far points."""
+        """Add (N, 3) world points where their voxels have room, then drop far points.
+
+        The k-d tree of the new map is built on a background thread (it releases the GIL)
+        while the next scan is cleaned and filtered; ``target`` waits for it.
+        """
         added = self._insert(np.asarray(points_world, dtype=np.float64))
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
+        self._tree = background().submit(cKDTree, self.points, balanced_tree=False, compact_nodes=False)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 
     def _insert(self, points: np.ndarray) -> int:
@@ -159,21 +179,22 @@ class LocalMap:
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
         # a kNN neighbourhood (< 1 voxel across) of a point next to a changed voxel may have changed
-        self._known[np.isin(self._keys, neighbourhood_keys(np.unique(keys)))] = False
+        self._known[in_sorted(self._keys, neighbourhood_keys(np.unique(keys)))] = False
         self._recount(np.concatenate([self._voxel_keys, keys]),
                       np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
         return int(len(keys))
 
     def _prune(self, position: np.ndarray) -> int:
-        d2 = np.einsum("ij,ij->i", self.points - position, self.points - position)
-        far = d2 > self.max_distance_m**2
-        n = int(far.sum())
-        if n:
-            self._recount(np.concatenate([self._voxel_keys, self._keys[far]]),
-                          np.concatenate([self._voxel_counts, -np.ones(n, dtype=np.int64)]))
-            self.points, self._keys = self.points[~far], self._keys[~far]
-            self._normals, self._known = self._normals[~far], self._known[~far]
-        return n
+        """Drop the voxels whose centre is farther than ``max_distance_m`` (a check per voxel, not per point)."""
+        d = voxel_centres(self._voxel_keys, self.voxel_size_m) - position
+        far = np.einsum("ij,ij->i", d, d) > self.max_distance_m**2
+        if not far.any():
+            return 0
+        drop = in_sorted(self._keys, self._voxel_keys[far])
+        self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
+        self.points, self._keys = self.points[~drop], self._keys[~drop]
+        self._normals, self._known = self._normals[~drop], self._known[~drop]
+        return int(drop.sum())
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
         """Occupied voxels and their counts from (key, count change) pairs."""
@@ -186,7 +207,7 @@ class LocalMap:
         """The map as a registration target (world frame): a k-d tree over its points and
         normals estimated on demand for the matched points (nan where no plane)."""
         points = self.points
-        tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
         def normals_of(rows: np.ndarray) -> np.ndarray:

@@ -248,6 +248,8 @@ class Odometry:
         # The rejection chains, built once: with GCR, and without (the first registration)
         self._chain_with_gcr = rejectors_for(config)
         self._chain_without_gcr = rejectors_for(config.replace(gcr=False))
+        self._chain_coarse = rejectors_for(config.replace(
+            gcr=False, trim_fraction=0.0, max_correspondence_distance_m=config.initial_correspondence_distance_m))
 
     @property
     def poses(self) -> list[np.ndarray]:
@@ -340,8 +342,22 @@ class Odometry:
             T_target_prev = se3.inverse(st.poses[st.target_frame]) @ T_world_prev
         target = self._target()
         source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
-        result = register(source, target, T_target_prev @ T_guess, cfg, chain, T_target_prev)
-        icp_seconds, icp_iterations = dict(result.seconds), result.iterations
+        T_init = T_target_prev @ T_guess
+        icp_seconds, icp_iterations = {}, 0
+        if first:
+            # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
+            # the correspondence bound, and the points that see it (few, in a corridor) would be
+            # trimmed first. A coarse registration with a wide bound and no trimming comes first.
+            coarse = register(source, target, T_init, cfg.replace(
+                max_correspondence_distance_m=cfg.initial_correspondence_distance_m, trim_fraction=0.0),
+                self._chain_coarse, T_target_prev)
+            icp_seconds, icp_iterations = dict(coarse.seconds), coarse.iterations
+            if not coarse.singular:
+                T_init = coarse.T_target_source
+        result = register(source, target, T_init, cfg, chain, T_target_prev)
+        for stage, spent in result.seconds.items():
+            icp_seconds[stage] = icp_seconds.get(stage, 0.0) + spent
+        icp_iterations += result.iterations
         T_deskew = T_guess
 
         def motion_of(T_target_cur: np.ndarray) -> np.ndarray:

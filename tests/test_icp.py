@@ -171,3 +171,25 @@ def test_implausible_estimate_is_flagged_and_extrapolated():
         pose = pose @ step
         loose.register(se3.transform_points(se3.inverse(pose), q))
     assert not loose.last.implausible and np.abs(loose.poses[2] - pose).max() < 5e-3
+
+
+@pytest.mark.parametrize("target", ["filtered", "raw", "map"])
+def test_every_match_target_tracks_a_known_motion(target):
+    """A corner of three planes, seen from a sensor that moves and turns: the previous filtered scan,
+    the previous raw scan (normals estimated where matched) and the local map all recover the path."""
+    rng = np.random.default_rng(5)
+    q, _ = planes_cloud(rng, 4000)
+    q += rng.normal(0.0, 0.002, q.shape)
+    cfg = BL.replace(normal_neighbours=10, min_range_m=0.1, deskew=False, match_target=target,
+                     map_voxel_size_m=0.5)
+    odo = Odometry(cfg)
+    step = se3.exp(np.array([0.15, 0.03, 0.01, 0.0, 0.002, 0.01]))
+    pose = np.eye(4)
+    for k in range(8):
+        odo.register(se3.transform_points(se3.inverse(pose), q))
+        assert not odo.last.extrapolated, (target, k)
+        err = se3.inverse(pose) @ odo.poses[-1]
+        assert np.linalg.norm(err[:3, 3]) < 5e-3 and np.degrees(se3.rotation_angle(err)) < 0.05, (target, k)
+        pose = pose @ step
+    if target == "map":
+        assert len(odo.state.local_map) > 0 and "plane" in odo.last.matches

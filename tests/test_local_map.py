@@ -1,0 +1,129 @@
+"""The local map of scan-to-map registration and the degeneracy handling, against constructed truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from odometry.constraints import remapped_step, restore_constraints
+from odometry.icp import match
+from odometry.local_map import LocalMap, rank_within_groups, voxel_keys
+from simlidar import se3
+
+
+def make_map(**kw) -> LocalMap:
+    args = {"voxel_size_m": 1.0, "max_points_per_voxel": 20, "max_distance_m": 100.0, "normal_neighbours": 12,
+            "noise_std_m": 0.02, "max_curvature": 0.05}
+    return LocalMap(**{**args, **kw})
+
+
+def test_rank_within_groups():
+    assert rank_within_groups(np.array([3, 3, 5, 7, 7, 7])).tolist() == [0, 1, 0, 0, 1, 2]
+    assert len(rank_within_groups(np.zeros(0, dtype=np.int64))) == 0
+
+
+def test_voxel_keys_distinguish_neighbours_and_refuse_the_far_away():
+    p = np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.5, 0.5, -0.5], [0.9, 0.1, 0.2]])
+    k = voxel_keys(p, 1.0)
+    assert len(set(k[:4].tolist())) == 4 and k[4] == k[0]
+    with pytest.raises(ValueError, match="cannot be put"):
+        voxel_keys(np.array([[2e6, 0.0, 0.0]]), 1.0)
+
+
+def test_map_caps_each_voxel_and_drops_far_points():
+    rng = np.random.default_rng(0)
+    m = make_map(max_points_per_voxel=5, max_distance_m=10.0)
+    in_one_voxel = rng.uniform(0.0, 1.0, (40, 3))
+    stats = m.update(in_one_voxel, np.zeros(3))
+    assert stats.added == 5 and len(m) == 5 and stats.voxels == 1
+    assert np.array_equal(m.points, in_one_voxel[:5])  # the first come stay (a stable map)
+    assert m.update(0.98 * in_one_voxel + 0.01, np.zeros(3)).added == 0  # full: nothing more
+    far = rng.uniform(0.0, 1.0, (3, 3)) + [20.0, 0.0, 0.0]
+    m.update(far, np.array([20.0, 0.0, 0.0]))  # the sensor moved: the first voxel is now 20 m behind
+    assert len(m) == 3 and np.all(m.points[:, 0] >= 20.0)
+    assert m.update(in_one_voxel, np.zeros(3)).added == 5  # the dropped voxel takes points again
+
+
+def test_map_normals_on_a_plane_but_not_on_a_single_ring():
+    """A noisy plane seen from several positions gives its normal; points of one line do not define a plane."""
+    rng = np.random.default_rng(1)
+    n_true = np.array([0.0, np.sin(0.2), np.cos(0.2)])  # a slope of 11 deg
+    u = np.cross(n_true, [1.0, 0.0, 0.0])
+    uv = rng.uniform(-5, 5, (4000, 2))
+    plane = uv[:, :1] * [[1.0, 0.0, 0.0]] + uv[:, 1:] * u + rng.normal(0, 0.02, (4000, 1)) * n_true
+    line = np.column_stack([np.linspace(0, 4, 200), np.full(200, 30.0), np.zeros(200)])
+    line += rng.normal(0, 0.02, line.shape) * [0.0, 1.0, 0.0]  # range noise across the line only
+    m = make_map()
+    m.update(np.vstack([plane, line]), np.zeros(3))
+    target = m.target()
+    q = np.array([[0.3, 0.0, 0.0], [-2.0, 1.0, 0.5], [2.0, 30.0, 0.0]])
+    q[:2] = q[:2, :1] * [1.0, 0.0, 0.0] + q[:2, 1:2] * u
+    found = match(q, target, 1.0)
+    assert len(found) == 3
+    n = target.normals_at(found.target_index)
+    angles = np.degrees(np.arccos(np.clip(np.abs(n[:2] @ n_true), 0, 1)))
+    assert np.all(angles < 2.0), angles
+    assert np.isnan(n[2]).all()  # the line: no plane
+    # the estimate is cached in the map until points arrive nearby
+    assert m._known[found.target_index].all()
+    m.update(plane[:5] + 0.001, np.zeros(3))  # nothing added (voxels full) ...
+    assert m._known[found.target_index[:2]].all()
+
+
+def test_remapped_step_keeps_the_prior_along_a_weak_direction():
+    """A corridor: walls (normals +-y) and floor (z) constrain y, z and rotations; 1 % of the points
+    see the corridor's end (normal x). With the threshold above that share, x stays at the prior."""
+    rng = np.random.default_rng(2)
+    n = 3000
+    walls = np.column_stack([rng.uniform(-20, 20, n), np.where(rng.random(n) < 0.5, -3.0, 3.0),
+                             rng.uniform(0, 4, n)])
+    floor = np.column_stack([rng.uniform(-20, 20, n), rng.uniform(-3, 3, n), np.zeros(n)])
+    end = np.column_stack([np.full(60, 25.0), rng.uniform(-3, 3, 60), rng.uniform(0, 4, 60)])
+    points = np.vstack([walls, floor, end])
+    normals = np.vstack([np.column_stack([np.zeros(n), -np.sign(walls[:, 1]), np.zeros(n)]),
+                         np.tile([0.0, 0.0, 1.0], (n, 1)), np.tile([-1.0, 0.0, 0.0], (60, 1))])
+    truth = np.array([0.05, -0.02, 0.01, 0.001, -0.002, 0.003])
+    # residuals of the linearised problem for the motion 'truth': r = -J truth
+    J = np.hstack([normals, np.cross(points, normals)])
+    r = -J @ truth
+    H, g = J.T @ J, J.T @ r
+    full = remapped_step(H, g, len(r), rotation_scale_m=10.0)
+    assert np.allclose(full.xi, truth, atol=1e-9) and full.remapped == 0
+    weak_share = 60 / len(r)  # the end wall's share of x information
+    kept = remapped_step(H, g, len(r), rotation_scale_m=10.0, min_eigenvalue=2 * weak_share)
+    assert kept.remapped == 1
+    assert abs(kept.xi[0]) < 1e-3  # x: left at the prior (no update)
+    assert np.allclose(kept.xi[1:], truth[1:], atol=2e-3)  # the rest solved
+
+
+def test_restore_constraints_gives_back_the_only_evidence_of_a_direction():
+    rng = np.random.default_rng(3)
+    n = 2000
+    points = rng.uniform(-10, 10, (n, 3))
+    normals = np.zeros((n, 3))
+    normals[: n // 2, 1] = 1.0
+    normals[n // 2: n - 40, 2] = 1.0
+    normals[n - 40:, 0] = 1.0  # 40 points alone constrain x
+    candidates = np.ones(n, dtype=bool)
+    kept = rng.random(n) < 0.5
+    kept[n - 40:] = False  # the filter rejected every one of them
+    out = restore_constraints(points, normals, candidates, kept, min_eigenvalue=0.01, rotation_scale_m=10.0)
+    assert np.array_equal(out[:n - 40], kept[:n - 40])  # nothing else is touched
+    restored = out[n - 40:].sum()
+    assert restored == 20  # 20 of 2000 points are exactly the 0.01 needed, no more
+    assert restore_constraints(points, normals, candidates, kept, 0.0, 10.0).sum() == kept.sum()
+
+
+def test_orthonormalize_stops_rounding_feedback():
+    """pose_k = pose_{k-1} (pose_{k-1}^-1 estimate): with transpose-inverses the rotation's error doubles
+    every step unless it is projected back onto SO(3)."""
+    M = se3.exp(np.array([1.0, 0.1, 0.0, 0.001, 0.002, 0.03]))  # the motion per frame
+    start = se3.exp(np.array([5.0, 2.0, 0.0, 0.0, 0.0, 1.0]))
+    start[:3, :3] *= 1 + 1e-15
+    drifting, fixed = start.copy(), start.copy()
+    for _ in range(24):  # the estimate is prev @ M; the motion is prev^-1 @ estimate; the pose prev @ motion
+        drifting = drifting @ (se3.inverse(drifting) @ (drifting @ M))
+        fixed = se3.orthonormalize(fixed @ (se3.inverse(fixed) @ (fixed @ M)))
+    def err(A):
+        return np.abs(A[:3, :3] @ A[:3, :3].T - np.eye(3)).max()
+    assert err(drifting) > 1e-6 and err(fixed) < 1e-12
