@@ -30,6 +30,7 @@ from simlidar.yaml_file import read_yaml
 
 NOISE_MODELS = ("range", "isotropic")
 MATCH_TARGETS = ("filtered", "raw", "map")
+NCF_SCOPES = ("scan", "map", "both")
 GCR_FORMULAS = ("beam", "paper")
 
 
@@ -57,6 +58,10 @@ class OdometryConfig:
             paper's plain linearisation at the observed neighbourhood.
         ncf_max_normal_std_deg: c_tau as an angle: a point is rejected when the
             largest eigenvalue of its normal covariance >= radians(this)^2.
+        ncf_applies_to: which normals the NCF judges: the "scan"'s own (the paper; in
+            scan-to-scan these become the next target's, the ones the cost uses), or, with
+            a map target, the "map"'s (the ones the cost then uses: each neighbour's noise
+            along the beam that measured it), or "both".
         max_curvature: PCL curvature above which a point is discarded.
     Preprocessing:
         min_range_m, max_range_m: points outside are ignored (ego vehicle, far noise).
@@ -114,6 +119,7 @@ class OdometryConfig:
     ncf_range_noise_std_m: float | None = None
     ncf_noise_free_gaps: bool = True
     ncf_max_normal_std_deg: float = 5.0
+    ncf_applies_to: str = "scan"
     max_curvature: float = 0.05
     min_range_m: float = 2.5
     max_range_m: float = 120.0
@@ -178,6 +184,10 @@ class OdometryConfig:
             fail("gcr_formula", f"must be one of {', '.join(GCR_FORMULAS)}, got {self.gcr_formula!r}")
         if self.match_target not in MATCH_TARGETS:
             fail("match_target", f"must be one of {', '.join(MATCH_TARGETS)}, got {self.match_target!r}")
+        if self.ncf_applies_to not in NCF_SCOPES:
+            fail("ncf_applies_to", f"must be one of {', '.join(NCF_SCOPES)}, got {self.ncf_applies_to!r}")
+        if self.ncf_applies_to != "scan" and self.match_target != "map":
+            fail("ncf_applies_to", f"'{self.ncf_applies_to}' needs match_target: map (there is no map to judge)")
         for key in ("ncf", "gcr", "deskew", "ncf_noise_free_gaps"):
             if not isinstance(getattr(self, key), bool):
                 fail(key, f"must be true or false, got {getattr(self, key)!r}")
@@ -200,8 +210,8 @@ BL = OdometryConfig(name="bl", ncf=False, gcr=False)
 NCF = OdometryConfig(name="ncf", ncf=True, gcr=False)
 SALO = OdometryConfig(name="salo", ncf=True, gcr=True)
 BL_MAP = BL.replace(name="bl-map", match_target="map")
-NCF_MAP = NCF.replace(name="ncf-map", match_target="map")
-SALO_MAP = SALO.replace(name="salo-map", match_target="map")
+NCF_MAP = NCF.replace(name="ncf-map", match_target="map", ncf_applies_to="map")
+SALO_MAP = SALO.replace(name="salo-map", match_target="map", ncf_applies_to="map")
 VARIANTS = {c.name: c for c in (BL, NCF, SALO, BL_MAP, NCF_MAP, SALO_MAP)}
 # What ``salo odometry`` runs without --variant (chosen on the generalisation suite's tuning
 # seeds; README "The method, and our choices").

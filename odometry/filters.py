@@ -76,7 +76,7 @@ class FilteredScan:
     normal_std_rad: (M,) 1-sigma tilt of the normal about its least certain axis
         (NCF's prediction; nan when the NCF did not run).
     raw_points: (N, 3) the de-skewed raw points the normals were estimated from.
-    raw_tree: cKDTree over ``raw_points``.
+    raw_tree: cKDTree over ``raw_points`` (None when no normals were estimated).
     centroids: (V, 3) every voxel centroid, before the filters (what a map keeps).
     centroid_times_s: (V,) their mean firing times, s, or None.
     counts: points after each stage: raw, voxels, ncf, curvature, and "restored"
@@ -90,7 +90,7 @@ class FilteredScan:
     times_s: np.ndarray | None
     normal_std_rad: np.ndarray
     raw_points: np.ndarray
-    raw_tree: cKDTree
+    raw_tree: cKDTree | None
     centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     centroid_times_s: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
@@ -112,6 +112,13 @@ def ncf_noise_model(config: OdometryConfig, sensor_range_noise_std_m: float | No
     return RangeNoise(range_noise_std_m=sigma)
 
 
+def scan_normals_needed(config: OdometryConfig) -> bool:
+    """Whether the scan's own normals are used: by the cost (scan-to-scan: the scan is the next
+    target), or by the NCF on the scan. Registered against a map, the cost and the GCR use the
+    map's normals, and the scan's points need none."""
+    return config.match_target != "map" or (config.ncf and config.ncf_applies_to in ("scan", "both"))
+
+
 def filter_scan(
     raw_points: np.ndarray,
     config: OdometryConfig,
@@ -119,9 +126,21 @@ def filter_scan(
     sensor_range_noise_std_m: float | None = None,
     raw_times_s: np.ndarray | None = None,
 ) -> FilteredScan:
-    """Filter a de-skewed raw scan (N, 3) into ICP points with normals (see module doc)."""
+    """Filter a de-skewed raw scan (N, 3) into ICP points with normals (see module doc).
+
+    When the scan's normals are not needed (``scan_normals_needed``), the ICP points are
+    the voxel centroids themselves, with nan normals, no rings and no raw k-d tree.
+    """
     seconds: dict[str, float] = {}
     t = time.perf_counter()
+    if not scan_normals_needed(config):
+        centroids, centroid_times = (voxel_centroids(raw_points, config.voxel_size_m), None) \
+            if raw_times_s is None else voxel_centroids(raw_points, config.voxel_size_m, raw_times_s)
+        seconds["voxel"] = time.perf_counter() - t
+        n = len(centroids)
+        return FilteredScan(centroids, np.full((n, 3), np.nan), None, centroid_times, np.full(n, np.nan),
+                            raw_points, None, centroids, centroid_times,
+                            {"raw": len(raw_points), "voxels": n, "ncf": n, "curvature": n}, seconds)
     # The raw k-d tree (for the normals) is built on a second core while this one
     # computes the voxel grid: both release the GIL, and the two take about as long.
     building = background().submit(cKDTree, raw_points, balanced_tree=False, compact_nodes=False)
@@ -145,7 +164,7 @@ def filter_scan(
     t = time.perf_counter()
     keep = np.ones(len(centroids), dtype=bool)
     normal_std = np.full(len(centroids), np.nan)
-    if config.ncf:
+    if config.ncf and config.ncf_applies_to in ("scan", "both"):
         noise = ncf_noise_model(config, sensor_range_noise_std_m)
         keep, cov = normal_covariance_filter(
             raw_points[est.neighbour_indices], noise,
@@ -156,7 +175,7 @@ def filter_scan(
     counts["ncf"] = int(keep.sum())
     flat = curvature_keep(est.curvature, config.max_curvature)
     keep &= flat
-    if config.ncf and config.min_constraint_eigenvalue > 0:
+    if config.ncf and config.ncf_applies_to in ("scan", "both") and config.min_constraint_eigenvalue > 0:
         # the NCF may not take away the last evidence of a direction of motion
         guarded = restore_constraints(centroids, est.normals, flat, keep, config.min_constraint_eigenvalue,
                                       config.rotation_scale_m)

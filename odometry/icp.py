@@ -27,13 +27,17 @@ from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector,
 class Source:
     """The scan being registered, in its own (de-skewed) sensor frame.
 
-    points: (M, 3) m; normals: (M, 3) unit;
-    gcr_threshold_m: (M,) max neighbour beam distance per point (None: no GCR).
+    points: (M, 3) m; normals: (M, 3) unit (nan when the scan has none of its own);
+    gcr_threshold_m: (M,) max neighbour beam distance per point (None: no GCR, or not yet known).
+    gcr_thresholds: ``(points (m, 3), normals (m, 3), rows (m,)) -> (m,)`` thresholds of
+        source rows from given normals, for a source without normals: ``register`` fills
+        ``gcr_threshold_m`` from the target's normals at the first matches.
     """
 
     points: np.ndarray
     normals: np.ndarray
     gcr_threshold_m: np.ndarray | None = None
+    gcr_thresholds: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
 
 
 @dataclass
@@ -162,6 +166,13 @@ def register(
         if planes_optional:
             m = m.select(np.isfinite(target.normals_at(m.target_index)[:, 0]))
             counts["plane"] = len(m)
+        if source.gcr_threshold_m is None and source.gcr_thresholds is not None:
+            # GCR thresholds from the target's normals at these first matches, turned into the
+            # source frame (a point without a match now has no bound: inf, the rejector abstains)
+            thr = np.full(len(source.points), np.inf)
+            n_src = target.normals_at(m.target_index) @ T[:3, :3]
+            thr[m.source_index] = source.gcr_thresholds(source.points[m.source_index], n_src, m.source_index)
+            source.gcr_threshold_m = thr
         for reject in rejectors:
             m = m.select(reject(m, source))
             counts[reject.__name__] = len(m)

@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 
 from .filters import background
 from .icp import Target
+from .ncf import ncf_keep, normal_covariance_along_beams
 from .normals import estimate_normals
 
 # A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis.
@@ -120,18 +121,25 @@ class LocalMap:
         normal_neighbours: k of the target normals' kNN among the map points.
         noise_std_m: the range noise sigma, for the planarity test of target normals, m.
         max_curvature: PCL curvature above which a target neighbourhood is not a plane.
+        ncf_c_tau_rad2: when given, the normal covariance filter also judges the map's
+            normals: each neighbour's noise lies along the beam that measured it (kept
+            per point from the sensor position at insertion), propagated to the normal
+            as in ``odometry.ncf``; a normal whose variance reaches this is no plane.
     """
 
     def __init__(self, voxel_size_m: float, max_points_per_voxel: int, max_distance_m: float,
-                 normal_neighbours: int, noise_std_m: float, max_curvature: float):
+                 normal_neighbours: int, noise_std_m: float, max_curvature: float,
+                 ncf_c_tau_rad2: float | None = None):
         self.voxel_size_m = float(voxel_size_m)
         self.max_points_per_voxel = int(max_points_per_voxel)
         self.max_distance_m = float(max_distance_m)
         self.normal_neighbours = int(normal_neighbours)
         self.noise_std_m = float(noise_std_m)
         self.max_curvature = float(max_curvature)
+        self.ncf_c_tau_rad2 = ncf_c_tau_rad2
         self.points = np.zeros((0, 3))
         self._keys = np.zeros(0, dtype=np.int64)  # voxel key of each point
+        self._beams = np.zeros((0, 3))  # unit direction from the sensor that saw each point
         # Target normals, estimated when first matched and kept until points arrive nearby:
         # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
         self._normals = np.zeros((0, 3))
@@ -153,12 +161,12 @@ class LocalMap:
         The k-d tree of the new map is built on a background thread (it releases the GIL)
         while the next scan is cleaned and filtered; ``target`` waits for it.
         """
-        added = self._insert(np.asarray(points_world, dtype=np.float64))
+        added = self._insert(np.asarray(points_world, dtype=np.float64), np.asarray(sensor_position_m, dtype=float))
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
         self._tree = background().submit(cKDTree, self.points, balanced_tree=False, compact_nodes=False)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 
-    def _insert(self, points: np.ndarray) -> int:
+    def _insert(self, points: np.ndarray, origin: np.ndarray) -> int:
         if len(points) == 0:
             return 0
         keys = voxel_keys(points, self.voxel_size_m)
@@ -176,6 +184,8 @@ class LocalMap:
         keys, points = keys[accept], points[accept]
         self.points = np.concatenate([self.points, points])
         self._keys = np.concatenate([self._keys, keys])
+        beams = points - origin
+        self._beams = np.concatenate([self._beams, beams / np.linalg.norm(beams, axis=1, keepdims=True)])
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
         # a kNN neighbourhood (< 1 voxel across) of a point next to a changed voxel may have changed
@@ -192,7 +202,7 @@ class LocalMap:
             return 0
         drop = in_sorted(self._keys, self._voxel_keys[far])
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
-        self.points, self._keys = self.points[~drop], self._keys[~drop]
+        self.points, self._keys, self._beams = self.points[~drop], self._keys[~drop], self._beams[~drop]
         self._normals, self._known = self._normals[~drop], self._known[~drop]
         return int(drop.sum())
 
@@ -206,7 +216,7 @@ class LocalMap:
     def target(self) -> Target:
         """The map as a registration target (world frame): a k-d tree over its points and
         normals estimated on demand for the matched points (nan where no plane)."""
-        points = self.points
+        points, beams = self.points, self._beams
         tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
@@ -216,7 +226,12 @@ class LocalMap:
             # (a normal's sign does not matter to a point-to-plane residual: r and J flip together)
             est = estimate_normals(points, k=k, query_points=points[rows], tree=tree)
             n = est.normals.copy()
-            n[~plane_normals_valid(est, self.noise_std_m, self.max_curvature)] = np.nan
+            valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)
+            if self.ncf_c_tau_rad2 is not None:
+                nc = normal_covariance_along_beams(points[est.neighbour_indices], beams[est.neighbour_indices],
+                                                   self.noise_std_m, pca=est)
+                valid &= ncf_keep(nc, self.ncf_c_tau_rad2)
+            n[~valid] = np.nan
             return n
 
         return Target(points, tree, self._normals, normals_of, self._known)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -143,13 +144,25 @@ def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray
 
 
 def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel | None, with_gcr: bool) -> Source:
-    """The registration's source: the filtered points and normals, with GCR thresholds when used."""
-    threshold = None
-    if with_gcr:
-        threshold = gcr_threshold_m(scan.points, scan.normals, scan.rings, sensor, config.gcr_formula,
-                                    config.gcr_noise_floor_m)
-        threshold[np.isnan(threshold)] = np.inf  # no neighbour beam to bound the match: keep it
-    return Source(scan.points, scan.normals, threshold)
+    """The registration's source: the filtered points and normals, with GCR thresholds when used.
+
+    The GCR's neighbour beam distances need the surface's normal at each point. Scans
+    registered against a map have no normals of their own (``filters.scan_normals_needed``):
+    the thresholds then come from the map's normal at each point's first match
+    (``icp.register``), rotated into the scan's frame.
+    """
+    if not with_gcr:
+        return Source(scan.points, scan.normals)
+    rings = scan.rings if scan.rings is not None else ring_of_points(scan.points, sensor)
+
+    def thresholds(points: np.ndarray, normals: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        thr = gcr_threshold_m(points, normals, rings[rows], sensor, config.gcr_formula, config.gcr_noise_floor_m)
+        thr[np.isnan(thr)] = np.inf  # no neighbour beam (or no normal) to bound the match: keep it
+        return thr
+
+    if np.isnan(scan.normals[:1]).any():
+        return Source(scan.points, scan.normals, None, thresholds)
+    return Source(scan.points, scan.normals, thresholds(scan.points, scan.normals, np.arange(len(scan.points))))
 
 
 def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
@@ -171,9 +184,11 @@ def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
 def new_local_map(config: OdometryConfig, sensor: LidarModel | None) -> LocalMap:
     """An empty local map with the config's parameters (noise: the sensor's range sigma, else 2 cm)."""
     noise = config.ncf_range_noise_std_m or (sensor.range_noise_std_m if sensor is not None else None) or 0.02
+    c_tau = (math.radians(config.ncf_max_normal_std_deg) ** 2
+             if config.ncf and config.ncf_applies_to in ("map", "both") else None)
     return LocalMap(config.map_voxel_size_m, config.map_points_per_voxel,
                     config.map_max_distance_m or config.max_range_m, config.normal_neighbours, noise,
-                    config.max_curvature)
+                    config.max_curvature, c_tau)
 
 
 def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:
@@ -183,8 +198,11 @@ def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:
 
 def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.ndarray, period_s: float) -> None:
     """Re-do the de-skew of a filtered scan's points, normals and centroids with a better motion (in place)."""
+    same = scan.points is scan.centroids  # (the ICP points are the centroids: move them once)
     scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, old_motion, new_motion, period_s)
-    if scan.centroid_times_s is not None and len(scan.centroids):
+    if same:
+        scan.centroids = scan.points
+    elif scan.centroid_times_s is not None and len(scan.centroids):
         scan.centroids, _ = redeskew(scan.centroids, scan.centroids, scan.centroid_times_s, old_motion, new_motion,
                                      period_s)
 

@@ -355,3 +355,24 @@ def test_kept_normals_are_better_than_rejected_ones_on_a_simulated_scan(simulate
     err = angle_between_normals_rad(est.normals, scan.normal[query])
     assert 0.02 < keep.mean() < 0.98  # a real split, not all or nothing
     assert np.median(err[keep]) < np.median(err[~keep])
+
+
+def test_beam_covariance_matches_the_general_propagation():
+    """Per-neighbour beams (a map's points, seen from different places): the closed form equals
+    the general first-order propagation with Sigma_j = sigma^2 b_j b_j^T."""
+    from odometry.ncf import normal_covariance_along_beams, normal_covariance_from_point_covariances
+
+    rng = np.random.default_rng(11)
+    M, k = 50, 12
+    base = rng.normal(size=(M, 1, 3)) * 10
+    P = base + rng.normal(size=(M, k, 3)) * [0.5, 0.4, 0.05]
+    origins = rng.normal(size=(M, k, 3)) * 8  # each neighbour measured from its own place
+    b = P - origins
+    b /= np.linalg.norm(b, axis=2, keepdims=True)
+    sigma = 0.03
+    fast = normal_covariance_along_beams(P, b, sigma)
+    slow = normal_covariance_from_point_covariances(P, sigma**2 * b[..., :, None] * b[..., None, :])
+    ok = np.isfinite(slow.cov_rad2).all(axis=(1, 2))
+    assert ok.sum() > 40
+    assert np.allclose(fast.cov_rad2[ok], slow.cov_rad2[ok], rtol=1e-9, atol=1e-15)
+    assert np.array_equal(np.isfinite(fast.eigenvalues_rad2[:, 2]), np.isfinite(slow.eigenvalues_rad2[:, 2]))
