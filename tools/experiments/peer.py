@@ -4,11 +4,13 @@ The peers (optional extra ``peer``: ``pip install -e '.[peer]'``), one module ea
 
 - ``kiss-icp`` (``peer_kiss_icp``): KISS-ICP (Vizzo et al., RA-L 2023), point-to-point
   ICP against a voxel-hash local map, adaptive threshold, constant-velocity de-skew.
+- ``genz-icp`` (``peer_genz_icp``): GenZ-ICP (Lee et al., RA-L 2025), a KISS-ICP fork
+  that weights point-to-plane against point-to-point residuals by local planarity.
 
 They run on the same frames as our odometry (the finite measured points and, when
 the scans are distorted, their per-point firing times), with the same range limits
-(ours, capped at ``PEER_MAX_RANGE_M``, KISS-ICP's default), so all see the same
-points. Each runner returns a ``PeerRun``; ``peer_unavailable_reason``
+(ours, capped at ``PEER_MAX_RANGE_M``, KISS-ICP's and GenZ-ICP's default), so all
+see the same points. Each runner returns a ``PeerRun``; ``peer_unavailable_reason``
 says why a peer cannot run (not installed, too old), and the table and the odometry
 bench print that instead of a row.
 
@@ -25,18 +27,21 @@ instant ``k + phi_k`` (in sweep periods), ``phi_k`` the frame's pose instant:
   - 1 for KISS-ICP (1.x) once it de-skews: it maps the times to [0, 1] and moves
     each point by ``exp((s - 1) log(delta))``, to the sweep's last firing (to one
     azimuth step, the start of the next sweep);
+  - 0.5 for GenZ-ICP with de-skew on: it moves each point by
+    ``exp((s - 0.5) log(delta))`` (KISS-ICP 0.x's rule), the middle of the sweep;
   - ``UNDESKEWED_INSTANT`` (0.5) for a distorted scan that is not de-skewed
-    (KISS-ICP's first two frames, while its motion estimate is still missing): a
-    rigid registration of a distorted scan places it at about the middle of its
-    firing times.
+    (KISS-ICP's first two frames and GenZ-ICP's first three, while their motion
+    estimate is still missing): a rigid registration of a distorted scan places
+    it at about the middle of its firing times.
 
 ``tests/test_peers.py`` measures each peer's residual time offset against the
 sweep starts, with and without times, on a simulated drive whose sensor oscillates
 in yaw (a time offset then shows in every frame's relative pose): 0.00 frame
 without times (-0.46 and -0.92 with a half- and a one-frame shift, the latter the
-old treatment of time-less frames); with times -0.18 for KISS-ICP, whose de-skew
-uses the previous frame's motion: under the oscillation's angular acceleration its
-pose falls a little before the sweep's end (+1.14 without the shift).
+old treatment of time-less frames); with times -0.02 for GenZ-ICP,
+and -0.18 for KISS-ICP, whose de-skew uses the previous frame's motion: under the
+oscillation's angular acceleration its pose falls a little before the sweep's end
+(+1.14 without the shift).
 
 ``sweep_start_poses`` turns poses at these instants into sweep-start poses, the one
 place where the convention is applied: the start of sweep k lies between frame
@@ -63,7 +68,7 @@ from simlidar import se3
 
 log = logging.getLogger(__name__)
 
-# The far range limit of every peer, m: KISS-ICP's default max_range.
+# The far range limit of every peer, m: KISS-ICP's and GenZ-ICP's default max_range.
 PEER_MAX_RANGE_M = 100.0
 # Pose instant (sweep periods after the sweep start) of a scan without per-point times.
 TIMELESS_INSTANT = 0.0
@@ -89,6 +94,8 @@ class PeerSpec:
 PEERS: dict[str, PeerSpec] = {p.name: p for p in (
     PeerSpec("kiss-icp", "KISS-ICP", "kiss-icp", "kiss_icp.kiss_icp", "1.3",
              "tools.experiments.peer_kiss_icp:run_kiss_icp"),
+    PeerSpec("genz-icp", "GenZ-ICP", "genz-icp", "genz_icp.genz_icp", "0.3.2",
+             "tools.experiments.peer_genz_icp:run_genz_icp"),
 )}
 
 

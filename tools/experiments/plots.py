@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 METHOD_COLORS = {"ground truth": "black", "BL": "tab:blue", "NCF": "tab:orange", "SALO": "tab:green",
-                 "KISS-ICP": "tab:purple"}
+                 "KISS-ICP": "tab:purple", "GenZ-ICP": "tab:brown"}
 # Widths and dashes differ so that methods whose tracks coincide stay visible under each other.
-METHOD_STYLES = {"BL": ("-", 3.4), "NCF": ("--", 2.2), "SALO": ("-", 1.2), "KISS-ICP": (":", 2.2)}
+METHOD_STYLES = {"BL": ("-", 3.4), "NCF": ("--", 2.2), "SALO": ("-", 1.2), "KISS-ICP": (":", 2.2),
+                 "GenZ-ICP": ("-.", 1.6)}
 REJECTOR_COLORS = {"distance": "tab:blue", "gcr": "tab:green"}
 TARGET_HATCH = {"filtered": "", "raw": "///"}
 # Log-scale plots show errors below this as this (exact zeros have no logarithm).
