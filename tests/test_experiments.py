@@ -139,14 +139,14 @@ def test_table_files_and_values(table_run):
     res = json.loads((out / "results.json").read_text())
     rows = {(r["sequence"], r["method"]): r for r in res["table"]}
     assert {("city-1", m) for m in ("BL", "NCF", "SALO")} <= set(rows)
-    assert {("overall", m) for m in ("BL", "NCF", "SALO", "KISS-ICP", "GenZ-ICP")} <= set(rows)
+    assert {("overall", m) for m in ("BL", "NCF", "SALO", "KISS-ICP", "GenZ-ICP", "small_gicp s2m")} <= set(rows)
     for m in ("BL", "NCF", "SALO"):
         r = rows[("city-1", m)]
         assert r["segments"] >= 5
         # A 20-frame city drive: a few metres per 100 m at most (first frame's cold start included).
         assert 0 < r["mu_m_per_100m"] < 10 and r["sigma_m_per_100m"] >= 0
         assert r["ate_rmse_m"] < 1.0 and r["extrapolated"] == 0
-    for label in ("KISS-ICP", "GenZ-ICP"):
+    for label in ("KISS-ICP", "GenZ-ICP", "small_gicp s2m"):
         peer = rows[("city-1", label)]
         assert peer["available"] == (peer["mu_m_per_100m"] is not None), peer
         if peer["available"]:

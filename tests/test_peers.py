@@ -1,4 +1,4 @@
-"""The peers (KISS-ICP, GenZ-ICP) against simulated ground truth, with and without per-point times.
+"""The peers (KISS-ICP, GenZ-ICP, small_gicp) against simulated ground truth, with and without per-point times.
 
 The sweep-start conversion is tested exactly on constructed poses. Whether each
 peer's poses belong to the instants its runner declares is measured on a simulated

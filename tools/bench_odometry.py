@@ -4,9 +4,9 @@
     python -m tools.bench_odometry --frames 300 --scene highway
 
 Simulates the sequence once (cached under out/bench/), then runs BL, NCF and SALO
-over the same frames in this process, and the peers (KISS-ICP, GenZ-ICP; ``pip
-install -e '.[peer]'``) that are installed, on the same frames held in memory,
-with SALO's time against each. Prints figures; asserts nothing.
+over the same frames in this process, and the peers (KISS-ICP, GenZ-ICP, small_gicp
+s2m; ``pip install -e '.[peer]'``) that are installed, on the same frames held in
+memory, with SALO's time against each. Prints figures; asserts nothing.
 """
 
 from __future__ import annotations

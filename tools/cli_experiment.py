@@ -17,7 +17,7 @@ DEFAULT_ROOT = Path("out/experiments")
 DEFAULT_CACHE = DEFAULT_ROOT / "sequences"
 TABLE_QUICK_FRAMES = 25
 # The table's methods (tools.experiments.table.DEFAULT_METHODS, spelled out: `salo --help` imports no numpy).
-TABLE_METHODS = "bl,ncf,salo,kiss-icp,genz-icp"
+TABLE_METHODS = "bl,ncf,salo,kiss-icp,genz-icp,small-gicp"
 REJECTORS_QUICK_FRAMES = 5
 
 
@@ -70,8 +70,8 @@ def _add_table(sub) -> None:
     p = sub.add_parser(
         "table",
         help="Table I: mean / std of the relative error per 100 m, BL / NCF / SALO and the peers",
-        description="Run BL, NCF and SALO (and the peers KISS-ICP and GenZ-ICP when the peer extra is "
-        "installed) over a suite of "
+        description="Run BL, NCF and SALO (and the peers KISS-ICP, GenZ-ICP and small_gicp s2m when the peer "
+        "extra is installed) over a suite of "
         "simulated sequences and tabulate the paper's figure: translational error of 100 m segments in m per "
         "100 m, mean and standard deviation per sequence and overall; plus KITTI %, ATE, RPE, each sequence's "
         "degeneracy summary and top-down trajectory plots (Fig. 4).",

@@ -6,7 +6,7 @@ One module per idea:
 - ``suite``:         the simulated sequences an experiment runs on, cached on disk by parameters.
 - ``peer``:          what the peer methods share (optional extra ``peer``): availability, the run
                      loop, the conversion of their poses to sweep starts.
-- ``peer_kiss_icp``, ``peer_genz_icp``: one runner per peer, through its Python API.
+- ``peer_kiss_icp``, ``peer_genz_icp``, ``peer_small_gicp``: one runner per peer, through its Python API.
 - ``truth``:         true correspondences between two scans, from the simulator's sidecar.
 - ``table``:         Table I: mean / std of the relative error per 100 m, BL / NCF / SALO and the peers.
 - ``rejector_study``: Sec. IV-A / Fig. 3: GCR against the distance rejector from perturbed guesses.

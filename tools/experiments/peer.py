@@ -6,6 +6,9 @@ The peers (optional extra ``peer``: ``pip install -e '.[peer]'``), one module ea
   ICP against a voxel-hash local map, adaptive threshold, constant-velocity de-skew.
 - ``genz-icp`` (``peer_genz_icp``): GenZ-ICP (Lee et al., RA-L 2025), a KISS-ICP fork
   that weights point-to-plane against point-to-point residuals by local planarity.
+- ``small-gicp`` (``peer_small_gicp``): a scan-to-map pipeline over small_gicp (Koide,
+  JOSS 2024): GICP of each downsampled scan against a Gaussian voxel map that forgets
+  voxels not seen for 100 frames, from a constant-velocity guess; no de-skew.
 
 They run on the same frames as our odometry (the finite measured points and, when
 the scans are distorted, their per-point firing times), with the same range limits
@@ -30,15 +33,15 @@ instant ``k + phi_k`` (in sweep periods), ``phi_k`` the frame's pose instant:
   - 0.5 for GenZ-ICP with de-skew on: it moves each point by
     ``exp((s - 0.5) log(delta))`` (KISS-ICP 0.x's rule), the middle of the sweep;
   - ``UNDESKEWED_INSTANT`` (0.5) for a distorted scan that is not de-skewed
-    (KISS-ICP's first two frames and GenZ-ICP's first three, while their motion
-    estimate is still missing): a rigid registration of a distorted scan places
-    it at about the middle of its firing times.
+    (small_gicp; KISS-ICP's first two frames and GenZ-ICP's first three, while
+    their motion estimate is still missing): a rigid registration of a distorted
+    scan places it at about the middle of its firing times.
 
 ``tests/test_peers.py`` measures each peer's residual time offset against the
 sweep starts, with and without times, on a simulated drive whose sensor oscillates
 in yaw (a time offset then shows in every frame's relative pose): 0.00 frame
 without times (-0.46 and -0.92 with a half- and a one-frame shift, the latter the
-old treatment of time-less frames); with times -0.02 for GenZ-ICP,
+old treatment of time-less frames); with times -0.02 for GenZ-ICP and small_gicp,
 and -0.18 for KISS-ICP, whose de-skew uses the previous frame's motion: under the
 oscillation's angular acceleration its pose falls a little before the sweep's end
 (+1.14 without the shift).
@@ -96,6 +99,8 @@ PEERS: dict[str, PeerSpec] = {p.name: p for p in (
              "tools.experiments.peer_kiss_icp:run_kiss_icp"),
     PeerSpec("genz-icp", "GenZ-ICP", "genz-icp", "genz_icp.genz_icp", "0.3.2",
              "tools.experiments.peer_genz_icp:run_genz_icp"),
+    PeerSpec("small-gicp", "small_gicp s2m", "small_gicp", "small_gicp", "1.0.1",
+             "tools.experiments.peer_small_gicp:run_small_gicp"),
 )}
 
 

@@ -2,9 +2,9 @@
 
 For every sequence of the suite (``tools.experiments.suite``) each method runs
 over the same frames: our odometry with the ``bl``, ``ncf`` and ``salo``
-configs (``odometry.pipeline.run_sequence``), and the peers KISS-ICP and GenZ-ICP
-through their Python APIs when installed (``tools.experiments.peer``; a missing one
-gets a row saying so). The paper's figure is the
+configs (``odometry.pipeline.run_sequence``), and the peers KISS-ICP, GenZ-ICP
+and a small_gicp scan-to-map pipeline through their Python APIs when installed
+(``tools.experiments.peer``; a missing one gets a row saying so). The paper's figure is the
 translational error of every ``segment_length_m`` (100 m) segment of the KITTI
 protocol (first frames every 10th frame, ``odometry.metrics.kitti_segment_errors``)
 in metres per 100 m: mean mu and population standard deviation sigma per
@@ -36,7 +36,7 @@ from .suite import SequenceSpec, ensure_sequence, table_suite
 log = logging.getLogger(__name__)
 
 OUR_METHODS = ("bl", "ncf", "salo")
-PEER_METHODS = tuple(PEERS)  # kiss-icp, genz-icp
+PEER_METHODS = tuple(PEERS)  # kiss-icp, genz-icp, small-gicp
 DEFAULT_METHODS = (*OUR_METHODS, *PEER_METHODS)
 METHOD_LABELS = {"bl": "BL", "ncf": "NCF", "salo": "SALO", **{name: p.label for name, p in PEERS.items()}}
 # A frame is "weakly constrained" when the smallest translational eigenvalue of its
@@ -48,7 +48,7 @@ WEAK_TRANSLATION_EIGENVALUE = 0.01
 class TableParams:
     """What the table runs on.
 
-    sequences: the suite. methods: any of bl, ncf, salo, kiss-icp, genz-icp.
+    sequences: the suite. methods: any of bl, ncf, salo, kiss-icp, genz-icp, small-gicp.
     segment_length_m: the paper's 100 m (shorter for quick runs; errors are
     still per 100 m). step_frames: spacing of segment starts (KITTI: 10).
     config_overrides: changes to all three odometry configs (e.g. match_target).
