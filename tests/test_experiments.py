@@ -1,9 +1,9 @@
 """The experiments at a small scale: the files they write, their structure and sane values.
 
 Small runs of the table, the rejector study, the NCF study and the report
-(seconds each); the pieces with a constructed truth (KISS-ICP's pose shift,
-the paper's noise draw, the true-correspondence test, the sequence cache) are
-tested exactly.
+(seconds each); the pieces with a constructed truth (the paper's noise draw,
+the true-correspondence test, the sequence cache) are tested exactly. The
+peers' pose conventions are tested in ``test_peers.py``.
 """
 
 from __future__ import annotations
@@ -61,16 +61,6 @@ def test_parse_spec_and_cache_key(cache):
     assert b != a  # another noise: another key, another folder
     with pytest.raises(ValueError, match="room for"):
         ensure_sequence(SequenceSpec("city", 1, frames=100000), cache)
-
-
-def test_kiss_end_poses_shift_to_sweep_starts():
-    from tools.experiments.peer import end_poses_to_start_poses
-
-    step = se3.exp(np.array([1.0, 0.1, 0.0, 0.0, 0.0, 0.05]))  # constant motion per sweep
-    starts = np.stack([np.linalg.matrix_power(step, k) for k in range(9)])  # truth at sweep starts
-    # KISS-ICP's frame is the end of sweep 0 (= start of sweep 1); its pose k is the end of sweep k.
-    ends = se3.inverse(starts[1]) @ starts[1:]
-    assert np.allclose(end_poses_to_start_poses(ends), starts[:-1], atol=1e-12)
 
 
 def test_noise_transform_follows_the_paper():
@@ -149,17 +139,20 @@ def test_table_files_and_values(table_run):
     res = json.loads((out / "results.json").read_text())
     rows = {(r["sequence"], r["method"]): r for r in res["table"]}
     assert {("city-1", m) for m in ("BL", "NCF", "SALO")} <= set(rows)
-    assert {("overall", m) for m in ("BL", "NCF", "SALO", "KISS-ICP")} <= set(rows)
+    assert {("overall", m) for m in ("BL", "NCF", "SALO", "KISS-ICP", "GenZ-ICP", "small_gicp s2m")} <= set(rows)
     for m in ("BL", "NCF", "SALO"):
         r = rows[("city-1", m)]
         assert r["segments"] >= 5
         # A 20-frame city drive: a few metres per 100 m at most (first frame's cold start included).
         assert 0 < r["mu_m_per_100m"] < 10 and r["sigma_m_per_100m"] >= 0
         assert r["ate_rmse_m"] < 1.0 and r["extrapolated"] == 0
-    kiss = rows[("city-1", "KISS-ICP")]
-    assert kiss["available"] == (kiss["mu_m_per_100m"] is not None)
-    if not kiss["available"]:
-        assert "not installed" in kiss["note"]
+    for label in ("KISS-ICP", "GenZ-ICP", "small_gicp s2m"):
+        peer = rows[("city-1", label)]
+        assert peer["available"] == (peer["mu_m_per_100m"] is not None), peer
+        if peer["available"]:
+            assert peer["ate_rmse_m"] < 1.0 and peer["frames_per_second"] > 0, peer
+        else:
+            assert "not installed" in peer["note"], peer
     deg = res["sequences"]["city-1"]["degeneracy"]
     assert deg["frames"] == CITY.frames and 0 < deg["t_eig0_min"] <= deg["t_eig0_median"] <= 1 / 3
     md = (out / "table.md").read_text()
@@ -329,6 +322,9 @@ def test_cli_commands_parse():
     cli_experiment.add_commands(parser.add_subparsers(dest="command", required=True))
     a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match_target=raw"])
     assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match_target=raw"]
+    from tools.experiments.table import DEFAULT_METHODS
+
+    assert a.methods == ",".join(DEFAULT_METHODS)  # the CLI's spelled-out default is the table's
     a = parser.parse_args(["experiment", "rejectors", "--levels", "1:0.1,3:0.3", "--pairs", "10"])
     assert a.func is cli_experiment.cmd_rejectors and cli_experiment._parse_levels(a.levels) == ((1, 0.1), (3, 0.3))
     assert parser.parse_args(["experiment", "ncf"]).func is cli_experiment.cmd_ncf

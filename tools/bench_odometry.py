@@ -4,8 +4,9 @@
     python -m tools.bench_odometry --frames 300 --scene highway
 
 Simulates the sequence once (cached under out/bench/), then runs BL, NCF and SALO
-over the same frames in this process, and KISS-ICP (``pip install kiss-icp``) when
-installed, with the speed ratio against it. Prints figures; asserts nothing.
+over the same frames in this process, and the peers (KISS-ICP, GenZ-ICP, small_gicp
+s2m; ``pip install -e '.[peer]'``) that are installed, on the same frames held in
+memory, with SALO's time against each. Prints figures; asserts nothing.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from odometry.config import variant
 from odometry.metrics import evaluate_trajectory
 from odometry.pipeline import Odometry
 from simlidar.dataset import open_sequence
-from tools.experiments.peer import kiss_icp_available, run_kiss_icp
+from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
 
 STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject", "estimate")
 
@@ -33,6 +34,20 @@ def sequence(scene: str, frames: int, sensor: str, out: Path):
 
     spec = SequenceSpec(scene, 0, frames, sensor, noise_std_m=load_sensor(sensor).range_noise_std_m, start_s=5.0)
     return open_sequence(ensure_sequence(spec, out, progress=True))
+
+
+class FramesInMemory:
+    """The frames of a sequence read once (what the peers' runners read: len, [k], sensor, poses, manifest)."""
+
+    def __init__(self, seq, frames: list):
+        self.frames = frames
+        self.sensor, self.poses, self.manifest, self.path = seq.sensor, seq.poses, seq.manifest, seq.path
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, k: int):
+        return self.frames[k]
 
 
 def peak_memory_mb(seq, name: str, frames: int) -> float:
@@ -75,15 +90,19 @@ def main() -> None:
               + " ".join(f"{per_stage[s]:9.1f}" for s in STAGES) + f" {mem:8.0f} {m.t_err_pct:8.3f}")
     print("\n(stage columns: ms per frame; de-skew includes the refinements; peak MB is the traced "
           f"allocation peak over {args.memory_frames} frames)")
-    if not kiss_icp_available():
-        print("KISS-ICP: not installed (pip install kiss-icp) - no peer timing")
-        return
-    # The table's runner: same range limits, sweep-start poses (its own are at the sweep's end).
+    # The peers, on the same frames in memory, with our range limits; sweep-start poses.
     cfg = variant("salo")
-    kiss = run_kiss_icp(seq, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
-    m = evaluate_trajectory(seq.poses, kiss.poses)
-    print(f"KISS-ICP {kiss.frames_per_second:8.1f} frames/s, t_err {m.t_err_pct:.3f} %; "
-          f"salo time / KISS-ICP time = {times['salo'] / kiss.seconds:.2f}")
+    in_memory = FramesInMemory(seq, frames)
+    print()
+    for name, spec in PEERS.items():
+        reason = peer_unavailable_reason(name)
+        if reason is not None:
+            print(f"{spec.label}: {reason} - no timing")
+            continue
+        run = run_peer(name, in_memory, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
+        m = evaluate_trajectory(seq.poses, run.poses)
+        print(f"{spec.label:15s} {run.frames_per_second:8.1f} frames/s, t_err {m.t_err_pct:.3f} %; "
+              f"salo time / {spec.label} time = {times['salo'] / run.seconds:.2f}")
 
 
 if __name__ == "__main__":

@@ -1,33 +1,69 @@
-"""KISS-ICP (Vizzo et al., RA-L 2023) as the peer method of the table, through its Python API.
+"""Peer odometry methods run on our frames through their Python APIs: what the peers share.
 
-Optional: install the ``peer`` extra (``pip install -e '.[peer]'``, which pulls
-``kiss-icp`` from PyPI). ``kiss_icp_available()`` says whether it imports; the
-table's KISS-ICP row says "not installed" otherwise.
+The peers (optional extra ``peer``: ``pip install -e '.[peer]'``), one module each:
 
-It runs on the same frames as our odometry: the measured points of each sweep
-and their per-point firing times, with its default configuration (voxel size
-max_range / 100, adaptive threshold, de-skew on), except that the range limits
-are ours (``min_range_m`` / ``max_range_m`` of the odometry config, capped at
-KISS-ICP's 100 m default), so both see the same points.
+- ``kiss-icp`` (``peer_kiss_icp``): KISS-ICP (Vizzo et al., RA-L 2023), point-to-point
+  ICP against a voxel-hash local map, adaptive threshold, constant-velocity de-skew.
+- ``genz-icp`` (``peer_genz_icp``): GenZ-ICP (Lee et al., RA-L 2025), a KISS-ICP fork
+  that weights point-to-plane against point-to-point residuals by local planarity.
+- ``small-gicp`` (``peer_small_gicp``): a scan-to-map pipeline over small_gicp (Koide,
+  JOSS 2024): GICP of each downsampled scan against a Gaussian voxel map that forgets
+  voxels not seen for 100 frames, from a constant-velocity guess; no de-skew.
 
-Which instant a KISS-ICP pose belongs to. KISS-ICP (1.x) de-skews a sweep to
-its *last* firing: it maps the firing times to [0, 1] and moves each point by
-``exp((s - 1) log(delta))``, with delta its last frame-to-frame motion. The
-pose it returns for sweep k is therefore the sensor pose at the end of sweep k,
-which is (to one azimuth step) the start of sweep k + 1; our ground truth and
-our odometry give the pose at the *start* of each sweep. So the pose of sweep
-k's start is KISS-ICP's pose of sweep k - 1. Sweep 0 has no predecessor; its
-start is put one constant-velocity step (KISS-ICP's own motion estimate of
-the next frame) before the end of sweep 0, and the trajectory is re-expressed
-relative to it, so ``poses[0]`` is the identity as everywhere else. Without
-this shift every pose would lead the truth by one frame (about 1 m at 10 m/s).
+They run on the same frames as our odometry (the finite measured points and, when
+the scans are distorted, their per-point firing times), with the same range limits
+(ours, capped at ``PEER_MAX_RANGE_M``, KISS-ICP's and GenZ-ICP's default), so all
+see the same points. Each runner returns a ``PeerRun``; ``peer_unavailable_reason``
+says why a peer cannot run (not installed, too old), and the table and the odometry
+bench print that instead of a row.
+
+Which instant a peer's pose belongs to. Our ground truth and our odometry give the
+sensor pose at each sweep's *start*. A peer's pose of frame k belongs to the
+instant ``k + phi_k`` (in sweep periods), ``phi_k`` the frame's pose instant:
+
+- 0 when the frame carries no per-point times (``scan_times`` is None): the scan
+  is motion-compensated or instantaneous (real KITTI's ``.bin`` files, a simulation
+  without motion distortion), no peer de-skews it, and its pose is that of the
+  scan's own frame, the sweep start. No shift applies.
+- With per-point times (raw, distorted scans):
+
+  - 1 for KISS-ICP (1.x) once it de-skews: it maps the times to [0, 1] and moves
+    each point by ``exp((s - 1) log(delta))``, to the sweep's last firing (to one
+    azimuth step, the start of the next sweep);
+  - 0.5 for GenZ-ICP with de-skew on: it moves each point by
+    ``exp((s - 0.5) log(delta))`` (KISS-ICP 0.x's rule), the middle of the sweep;
+  - ``UNDESKEWED_INSTANT`` (0.5) for a distorted scan that is not de-skewed
+    (small_gicp; KISS-ICP's first two frames and GenZ-ICP's first three, while
+    their motion estimate is still missing): a rigid registration of a distorted
+    scan places it at about the middle of its firing times.
+
+``tests/test_peers.py`` measures each peer's residual time offset against the
+sweep starts, with and without times, on a simulated drive whose sensor oscillates
+in yaw (a time offset then shows in every frame's relative pose): 0.00 frame
+without times (-0.46 and -0.92 with a half- and a one-frame shift, the latter the
+old treatment of time-less frames); with times -0.02 for GenZ-ICP and small_gicp,
+and -0.18 for KISS-ICP, whose de-skew uses the previous frame's motion: under the
+oscillation's angular acceleration its pose falls a little before the sweep's end
+(+1.14 without the shift).
+
+``sweep_start_poses`` turns poses at these instants into sweep-start poses, the one
+place where the convention is applied: the start of sweep k lies between frame
+k-1's pose (at ``k - 1 + phi_{k-1}``) and frame k's (at ``k + phi_k``), and is
+screw-interpolated there; sweep 0's start is extrapolated back along the first
+interval; all are then expressed relative to sweep 0's start (``poses[0]`` is the
+identity, as everywhere else). With phi = 1 this is the one-frame shift
+``start[k] = end[k - 1]``; with phi = 0 it changes nothing.
 """
 
 from __future__ import annotations
 
+import importlib
 import logging
+import re
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
@@ -35,99 +71,247 @@ from simlidar import se3
 
 log = logging.getLogger(__name__)
 
-KISS_DEFAULT_MAX_RANGE_M = 100.0
+# The far range limit of every peer, m: KISS-ICP's and GenZ-ICP's default max_range.
+PEER_MAX_RANGE_M = 100.0
+# Pose instant (sweep periods after the sweep start) of a scan without per-point times.
+TIMELESS_INSTANT = 0.0
+# Pose instant of a distorted scan registered as it is (not de-skewed).
+UNDESKEWED_INSTANT = 0.5
+INSTALL_HINT = "pip install -e '.[peer]'"
 
 
-def kiss_icp_available() -> bool:
-    """True when ``kiss_icp`` imports."""
+@dataclass(frozen=True)
+class PeerSpec:
+    """One peer: its method key, table label, pip distribution, the module that must
+    import, the oldest version the runner is written for (the ``peer`` extra's floor,
+    the version the pose-instant conventions were checked on), and its runner."""
+
+    name: str
+    label: str
+    distribution: str
+    module: str
+    min_version: str
+    runner: str  # "module:function"
+
+
+PEERS: dict[str, PeerSpec] = {p.name: p for p in (
+    PeerSpec("kiss-icp", "KISS-ICP", "kiss-icp", "kiss_icp.kiss_icp", "1.3",
+             "tools.experiments.peer_kiss_icp:run_kiss_icp"),
+    PeerSpec("genz-icp", "GenZ-ICP", "genz-icp", "genz_icp.genz_icp", "0.3.2",
+             "tools.experiments.peer_genz_icp:run_genz_icp"),
+    PeerSpec("small-gicp", "small_gicp s2m", "small_gicp", "small_gicp", "1.0.1",
+             "tools.experiments.peer_small_gicp:run_small_gicp"),
+)}
+
+
+class PeerUnavailable(ImportError):
+    """A peer cannot run here (not installed, or older than the runner is written for)."""
+
+
+def _spec(name: str) -> PeerSpec:
     try:
-        import kiss_icp.kiss_icp  # noqa: F401
-    except ImportError:
-        return False
-    return True
+        return PEERS[name]
+    except KeyError:
+        raise ValueError(f"unknown peer {name!r} (known: {', '.join(PEERS)})") from None
 
 
-def kiss_icp_version() -> str | None:
+def _version_tuple(text: str) -> tuple[int, ...]:
+    """Leading numeric release parts of a version string: "1.3.0rc1" -> (1, 3, 0)."""
+    parts = []
+    for piece in text.split("."):
+        m = re.match(r"\d+", piece)
+        if m is None:
+            break
+        parts.append(int(m.group()))
+        if m.end() < len(piece):
+            break
+    return tuple(parts)
+
+
+def peer_version(name: str) -> str | None:
+    """The installed version of a peer's distribution, or None."""
     try:
-        from importlib.metadata import version
-
-        return version("kiss-icp")
-    except Exception:  # noqa: BLE001 - any failure means "unknown"
+        return version(_spec(name).distribution)
+    except PackageNotFoundError:
         return None
 
 
+def peer_unavailable_reason(name: str) -> str | None:
+    """Why peer ``name`` cannot run here (a sentence for a table row), or None when it can."""
+    spec = _spec(name)
+    try:
+        importlib.import_module(spec.module)
+    except ImportError:
+        return f"not installed ({INSTALL_HINT})"
+    found = peer_version(name)
+    if found is not None and _version_tuple(found) < _version_tuple(spec.min_version):
+        return (f"{spec.distribution} {found} is older than {spec.min_version}, the version its pose "
+                f"convention was checked on ({INSTALL_HINT})")
+    return None
+
+
+def peer_available(name: str) -> bool:
+    """True when peer ``name`` imports and is recent enough."""
+    return peer_unavailable_reason(name) is None
+
+
+def require_peer(name: str) -> None:
+    """Raise ``PeerUnavailable`` (an ImportError) naming the reason when peer ``name`` cannot run."""
+    reason = peer_unavailable_reason(name)
+    if reason is not None:
+        raise PeerUnavailable(f"{_spec(name).label}: {reason}")
+
+
+def range_limits(min_range_m: float, max_range_m: float) -> tuple[float, float]:
+    """The range limits every peer gets, m: ours, the far one capped at ``PEER_MAX_RANGE_M``."""
+    return float(min_range_m), min(float(max_range_m), PEER_MAX_RANGE_M)
+
+
+# ---------------------------------------------------------------- the pose-instant convention
+def scan_times(sequence, frame) -> np.ndarray | None:
+    """A frame's per-point times since its sweep start, (N,) float64 s, or None for an undistorted scan.
+
+    None when the frame has no times, when they are all equal (nothing to de-skew
+    with), or when the sequence's manifest says it was simulated without motion
+    distortion: those times are the firing times of an instantaneous scan, and
+    de-skewing it with them would distort it.
+    """
+    manifest = getattr(sequence, "manifest", None) or {}
+    if manifest.get("motion_distortion") is False:
+        return None
+    t = frame.time_s
+    if t is None:
+        return None
+    t = np.asarray(t, dtype=np.float64)
+    finite = t[np.isfinite(t)]
+    if len(finite) == 0 or not finite.max() > finite.min():
+        return None
+    return t
+
+
+def pose_instant(times: np.ndarray | None, deskewed_to: float | None) -> float:
+    """Pose instant of a frame, sweep periods after its start (see the module notes).
+
+    times: the frame's per-point times as given to the peer (None: none).
+    deskewed_to: the instant the peer de-skewed this frame to, or None when it did not.
+    """
+    if times is None:
+        return TIMELESS_INSTANT
+    return UNDESKEWED_INSTANT if deskewed_to is None else float(deskewed_to)
+
+
+def sweep_start_poses(poses: np.ndarray, instants) -> np.ndarray:
+    """Poses (N, 4, 4) at instants ``k + instants[k]`` -> sweep-start poses (N, 4, 4), the first the identity.
+
+    poses: a peer's poses, frame k's at ``k + instants[k]`` sweep periods.
+    instants: (N,) or a scalar, each in [0, 1].
+    See the module notes for the interpolation.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    n = len(poses)
+    if n == 0:
+        raise ValueError("no poses")
+    phi = np.broadcast_to(np.asarray(instants, dtype=np.float64), (n,))
+    if not np.all((phi >= 0.0) & (phi <= 1.0)):
+        raise ValueError("pose instants must lie in [0, 1] sweep periods")
+    if n == 1:
+        return np.eye(4)[None]
+    at = np.arange(n) + phi  # each pose's instant, sweep periods
+    span = np.diff(at)  # >= 0
+    tiny = 1e-12
+    frac = np.where(span > tiny, (np.arange(1, n) - at[:-1]) / np.maximum(span, tiny), 1.0)
+    starts = np.empty_like(poses)
+    starts[1:] = se3.interpolate(poses[:-1], poses[1:], frac)
+    starts[0] = se3.interpolate(poses[0], poses[1], -phi[0] / span[0]) if span[0] > tiny else poses[0]
+    return se3.inverse(starts[0]) @ starts
+
+
+# ---------------------------------------------------------------- the run
 @dataclass
 class PeerRun:
-    """Poses (N, 4, 4) ``T_first_lidar`` at each sweep's start, the config used and the run time."""
+    """A peer over a sequence.
+
+    poses: (N, 4, 4) ``T_first_lidar`` at each sweep's start (first = identity).
+    config: every setting used, the peer's version, and the input kind.
+    seconds: wall time of the frame loop (reading frames included, as for our odometry).
+    method_poses: (N, 4, 4) the poses as the peer returned them.
+    instants: (N,) the instant each of those belongs to, sweep periods after the sweep start.
+    After a divergence (``config["diverged_at_frame"]``) all three are NaN.
+    """
 
     poses: np.ndarray
     config: dict
     seconds: float
+    method_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    instants: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def frames_per_second(self) -> float:
-        return len(self.poses) / self.seconds if self.seconds > 0 else float("nan")
+        """Frames registered per second of ``seconds`` (up to a divergence)."""
+        done = int(np.sum(np.isfinite(self.instants))) if len(self.instants) else len(self.poses)
+        return done / self.seconds if self.seconds > 0 else float("nan")
 
 
-def end_poses_to_start_poses(end_poses: np.ndarray) -> np.ndarray:
-    """KISS-ICP's sweep-end poses (N, 4, 4) -> sweep-start poses (N, 4, 4), the first the identity.
+# register(points (M, 3) float64 m, times (M,) float64 s or None) -> (pose (4, 4), pose instant)
+Register = Callable[[np.ndarray, "np.ndarray | None"], "tuple[np.ndarray, float]"]
 
-    ``start[k] = end[k - 1]`` for k >= 1; ``start[0] = end[0] delta^-1`` with
-    ``delta = end[0]^-1 end[1]`` (one constant-velocity step back); then all are
-    re-expressed relative to ``start[0]``. See the module notes.
+
+def valid_pose(T: np.ndarray) -> bool:
+    """True for a finite (4, 4) rigid transform (rotation orthonormal to 1e-6)."""
+    T = np.asarray(T)
+    return bool(np.all(np.isfinite(T)) and np.abs(T[:3, :3] @ T[:3, :3].T - np.eye(3)).max() < 1e-6)
+
+
+def run_frames(name: str, sequence, register: Register, config: dict, frames: slice | None = None,
+               on_frame: Callable[[int], None] | None = None) -> PeerRun:
+    """The loop every peer shares: feed each frame to ``register``, convert to sweep-start poses.
+
+    Each frame's finite points (and their times, see ``scan_times``) go to
+    ``register``, which returns the peer's pose after that frame and the frame's
+    pose instant (``pose_instant``). A pose that is not a finite rigid transform
+    ends the run (the peer diverged): that frame and the rest get NaN poses and
+    ``config["diverged_at_frame"]`` says where. ``config`` is completed with the
+    peer's version and the input kind. ``frames``: which frames (default all);
+    ``on_frame(k)`` after each (progress).
     """
-    end_poses = np.asarray(end_poses, dtype=np.float64)
-    n = len(end_poses)
-    if n == 1:
-        return np.eye(4)[None]
-    delta = se3.inverse(end_poses[0]) @ end_poses[1]
-    start = np.empty_like(end_poses)
-    start[0] = end_poses[0] @ se3.inverse(delta)
-    start[1:] = end_poses[:-1]
-    return se3.inverse(start[0]) @ start
-
-
-def run_kiss_icp(sequence, min_range_m: float = 2.5, max_range_m: float = KISS_DEFAULT_MAX_RANGE_M,
-                 frames: slice | None = None, on_frame=None) -> PeerRun:
-    """Run KISS-ICP over (a slice of) a ``simlidar.dataset.Sequence``.
-
-    Args:
-        sequence: frames with points and per-point ``time_s`` (de-skew is off
-            for frames without times).
-        min_range_m, max_range_m: range limits, m (max capped at 100 m, KISS-ICP's default).
-        frames: which frames (default all).
-        on_frame: ``on_frame(k)`` after each frame (progress).
-
-    Returns:
-        ``PeerRun`` with sweep-start poses. Raises ImportError when kiss-icp is missing.
-    """
-    from kiss_icp.config import KISSConfig
-    from kiss_icp.kiss_icp import KissICP
-
-    version = kiss_icp_version() or ""
-    if version.startswith("0."):
-        # 0.x de-skews to mid-sweep, not to the sweep's end: the pose shift below would be wrong.
-        raise ImportError(f"kiss-icp {version} is too old (the table needs kiss-icp >= 1.0)")
-    max_range = min(float(max_range_m), KISS_DEFAULT_MAX_RANGE_M)
-    config = KISSConfig()
-    config.data.min_range = float(min_range_m)
-    config.data.max_range = max_range
-    config.mapping.voxel_size = max_range / 100.0  # its load_config's default rule
-    odometry = KissICP(config)
-    idx = np.arange(len(sequence))[frames or slice(None)]
-    ends = []
+    idx = np.arange(len(sequence))[frames if frames is not None else slice(None)]
+    n = len(idx)
+    if n == 0:
+        raise ValueError(f"{name}: no frames to run")
+    method_poses = np.full((n, 4, 4), np.nan)
+    instants = np.full(n, np.nan)
+    timed, diverged_at = 0, None
     t0 = time.perf_counter()
-    for k in idx:
+    for i, k in enumerate(idx):
         frame = sequence[int(k)]
-        pts = np.ascontiguousarray(frame.points, dtype=np.float64)
-        finite = np.all(np.isfinite(pts), axis=1)
-        times = frame.time_s
-        stamps = np.zeros(0) if times is None else np.asarray(times, dtype=np.float64)[finite]
-        odometry.register_frame(pts[finite], stamps)
-        ends.append(odometry.last_pose.copy())
+        pts = np.asarray(frame.points, dtype=np.float64)
+        keep = np.all(np.isfinite(pts), axis=1)
+        times = scan_times(sequence, frame)
+        if times is not None:
+            keep &= np.isfinite(times)
+            times = np.ascontiguousarray(times[keep])
+            timed += 1
+        pose, instant = register(np.ascontiguousarray(pts[keep]), times)
         if on_frame is not None:
             on_frame(int(k))
+        if not valid_pose(pose):
+            diverged_at = int(k)
+            log.warning("%s diverged at frame %d (not a finite rigid transform); the rest of the run is NaN",
+                        name, diverged_at)
+            break
+        method_poses[i], instants[i] = pose, instant
     seconds = time.perf_counter() - t0
-    used = config.model_dump() if hasattr(config, "model_dump") else {}
-    used["kiss_icp_version"] = kiss_icp_version()
-    return PeerRun(end_poses_to_start_poses(np.stack(ends)), used, seconds)
+    done = int(np.sum(np.isfinite(instants)))
+    poses = np.full((n, 4, 4), np.nan)
+    poses[:done] = sweep_start_poses(method_poses[:done], instants[:done]) if done else np.nan
+    config = {**config, "version": peer_version(name), "frames": n, "frames_with_times": timed,
+              "diverged_at_frame": diverged_at}
+    log.info("%s: %d frames (%d with per-point times) in %.1f s", name, n, timed, seconds)
+    return PeerRun(poses, config, seconds, method_poses, instants)
+
+
+def run_peer(name: str, sequence, **kwargs) -> PeerRun:
+    """Run peer ``name`` over ``sequence`` (kwargs: its runner's: ``min_range_m``, ``max_range_m``,
+    ``frames``, ``on_frame``, ...). Raises ``PeerUnavailable`` when it cannot run here."""
+    module, func = _spec(name).runner.split(":")
+    return getattr(importlib.import_module(module), func)(sequence, **kwargs)

@@ -20,7 +20,7 @@ METHOD_COLORS = {"ground truth": "black", "BL": "tab:blue", "NCF": "tab:orange",
                  "SALO map": "tab:pink", "GenZ-ICP": "tab:brown", "small_gicp s2m": "tab:gray"}
 # Widths and dashes differ so that methods whose tracks coincide stay visible under each other.
 METHOD_STYLES = {"BL": ("-", 3.4), "NCF": ("--", 2.2), "SALO": ("-", 1.2), "KISS-ICP": (":", 2.2),
-                 "default": ("-", 2.6), "GenZ-ICP": ("-.", 1.6), "small_gicp s2m": (":", 1.6)}
+                 "default": ("-", 2.6), "GenZ-ICP": ("-.", 1.6), "small_gicp s2m": ((0, (1, 3)), 2.0)}
 REJECTOR_COLORS = {"distance": "tab:blue", "gcr": "tab:green"}
 TARGET_HATCH = {"filtered": "", "raw": "///"}
 # Log-scale plots show errors below this as this (exact zeros have no logarithm).

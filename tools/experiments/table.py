@@ -1,9 +1,10 @@
-"""Table I on simulated data: relative positioning error per 100 m, BL / NCF / SALO / KISS-ICP.
+"""Table I on simulated data: relative positioning error per 100 m, BL / NCF / SALO and the peers.
 
 For every sequence of the suite (``tools.experiments.suite``) each method runs
 over the same frames: our odometry with the ``bl``, ``ncf`` and ``salo``
-configs (``odometry.pipeline.run_sequence``), and KISS-ICP through its Python
-API when installed (``tools.experiments.peer``). The paper's figure is the
+configs (``odometry.pipeline.run_sequence``), and the peers KISS-ICP, GenZ-ICP
+and a small_gicp scan-to-map pipeline through their Python APIs when installed
+(``tools.experiments.peer``; a missing one gets a row saying so). The paper's figure is the
 translational error of every ``segment_length_m`` (100 m) segment of the KITTI
 protocol (first frames every 10th frame, ``odometry.metrics.kitti_segment_errors``)
 in metres per 100 m: mean mu and population standard deviation sigma per
@@ -28,15 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .peer import PEERS
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
 from .suite import SequenceSpec, ensure_sequence, table_suite
 
 log = logging.getLogger(__name__)
 
 OUR_METHODS = ("bl", "ncf", "salo")
-PEER = "kiss-icp"
-DEFAULT_METHODS = (*OUR_METHODS, PEER)
-METHOD_LABELS = {"bl": "BL", "ncf": "NCF", "salo": "SALO", PEER: "KISS-ICP"}
+PEER_METHODS = tuple(PEERS)  # kiss-icp, genz-icp, small-gicp
+DEFAULT_METHODS = (*OUR_METHODS, *PEER_METHODS)
+METHOD_LABELS = {"bl": "BL", "ncf": "NCF", "salo": "SALO", **{name: p.label for name, p in PEERS.items()}}
 # A frame is "weakly constrained" when the smallest translational eigenvalue of its
 # per-point information (true normals) is below this (the odometry's degenerate_eigenvalue default).
 WEAK_TRANSLATION_EIGENVALUE = 0.01
@@ -46,7 +48,7 @@ WEAK_TRANSLATION_EIGENVALUE = 0.01
 class TableParams:
     """What the table runs on.
 
-    sequences: the suite. methods: any of bl, ncf, salo, kiss-icp.
+    sequences: the suite. methods: any of bl, ncf, salo, kiss-icp, genz-icp, small-gicp.
     segment_length_m: the paper's 100 m (shorter for quick runs; errors are
     still per 100 m). step_frames: spacing of segment starts (KITTI: 10).
     config_overrides: changes to all three odometry configs (e.g. match_target).
@@ -130,37 +132,50 @@ def degeneracy_summary(sequence_dir: Path) -> dict:
 
 
 def run_method(method: str, sequence, params: TableParams, progress: bool) -> MethodResult:
-    """One method over one sequence (KISS-ICP: a "not installed" result when missing)."""
+    """One method over one sequence (a peer: a "not installed" result when it cannot run here)."""
     from tqdm import tqdm
 
-    from odometry.metrics import evaluate_trajectory
     from odometry.pipeline import run_sequence
-
-    from .peer import kiss_icp_available, run_kiss_icp
 
     overrides = dict(params.config_overrides)
     desc = f"{METHOD_LABELS[method]} {sequence.path.name}"
     with tqdm(total=len(sequence), unit="frame", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
-        if method == PEER:
-            if not kiss_icp_available():
-                return MethodResult(method, False, "not installed (pip install -e '.[peer]')")
-            cfg = odometry_config("salo", overrides)
-            try:
-                run = run_kiss_icp(sequence, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m,
-                                   on_frame=lambda k: bar.update(1))
-            except ImportError as exc:
-                return MethodResult(method, False, str(exc))
-            except Exception as exc:  # noqa: BLE001 - the peer failing must not end a long run; the row says why
-                log.warning("KISS-ICP failed on %s: %s", sequence.path.name, exc)
-                return MethodResult(method, False, f"failed: {type(exc).__name__}: {exc}")
-            res = MethodResult(method, True, f"kiss-icp {run.config.get('kiss_icp_version')}", run.poses,
-                               frames_per_second=run.frames_per_second)
+        if method in PEER_METHODS:
+            res = run_peer_method(method, sequence, odometry_config("salo", overrides), lambda k: bar.update(1))
+            if not res.available:
+                return res
         else:
             run = run_sequence(sequence, odometry_config(method, overrides), on_frame=lambda k, d: bar.update(1))
             res = MethodResult(method, True, "", run.poses, frames_per_second=run.frames_per_second,
                                flagged_degenerate=sum(d.degenerate for d in run.diagnostics),
                                extrapolated=sum(d.extrapolated for d in run.diagnostics))
             res.diagnostics = run.diagnostics
+    return score_method(res, sequence, params)
+
+
+def run_peer_method(method: str, sequence, cfg, on_frame) -> MethodResult:
+    """A peer over one sequence with our range limits (``cfg``: our odometry config); its failure is a row."""
+    from .peer import PeerUnavailable, peer_unavailable_reason, run_peer
+
+    reason = peer_unavailable_reason(method)
+    if reason is not None:
+        return MethodResult(method, False, reason)
+    try:
+        run = run_peer(method, sequence, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m,
+                       on_frame=on_frame)
+    except PeerUnavailable as exc:
+        return MethodResult(method, False, str(exc))
+    except Exception as exc:  # noqa: BLE001 - a peer failing must not end a long run; the row says why
+        log.warning("%s failed on %s: %s", METHOD_LABELS[method], sequence.path.name, exc)
+        return MethodResult(method, False, f"failed: {type(exc).__name__}: {exc}")
+    return MethodResult(method, True, f"{PEERS[method].distribution} {run.config.get('version')}", run.poses,
+                        frames_per_second=run.frames_per_second)
+
+
+def score_method(res: MethodResult, sequence, params: TableParams) -> MethodResult:
+    """Fill in a finished method's errors against the sequence's ground truth (or mark it diverged)."""
+    from odometry.metrics import evaluate_trajectory
+
     gt = sequence.poses
     bad = ~np.all(np.isfinite(res.poses.reshape(len(res.poses), -1)), axis=1)
     if bad.any():
