@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from simlidar import se3
-from simlidar.dataset import Frame, Sequence, atomic_write_text, format_kitti_poses
+from simlidar.dataset import Frame, Sequence, atomic_write_text, deskew_times, format_kitti_poses
 from simlidar.sensor import LidarModel
 
 from .config import OdometryConfig
@@ -532,7 +532,7 @@ def run_sequence(
     for k in idx:
         frame = sequence[int(k)]
         stamp = float(sequence.times[k]) if sequence.times is not None and k < len(sequence.times) else None
-        odo.register_frame(frame, stamp_s=stamp)
+        odo.register(frame.points, times_s=deskew_times(sequence, frame), rings=frame.ring, stamp_s=stamp)
         if on_frame is not None:
             on_frame(int(k), odo.last)
     times = None if sequence.times is None else np.asarray(sequence.times)[idx]

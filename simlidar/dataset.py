@@ -435,6 +435,28 @@ class Sequence:
                 raise DatasetError(f"{p}: checksum differs from the manifest (file changed?)")
 
 
+def deskew_times(sequence, frame: Frame) -> np.ndarray | None:
+    """A frame's per-point times since its sweep start, (N,) float64 s, or None for an undistorted scan.
+
+    None when the frame has no times, when they are all equal (nothing to de-skew
+    with), or when the sequence's manifest says it was simulated without motion
+    distortion: those times are the firing times of an instantaneous scan, and
+    de-skewing it with them would distort it. Every method (ours and the peers)
+    decides this here.
+    """
+    manifest = getattr(sequence, "manifest", None) or {}
+    if manifest.get("motion_distortion") is False:
+        return None
+    t = frame.time_s
+    if t is None:
+        return None
+    t = np.asarray(t, dtype=np.float64)
+    finite = t[np.isfinite(t)]
+    if len(finite) == 0 or not finite.max() > finite.min():
+        return None
+    return t
+
+
 def open_sequence(
     path: str | Path,
     sensor: str | Path | LidarModel | None = None,

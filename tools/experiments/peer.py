@@ -68,6 +68,7 @@ from importlib.metadata import PackageNotFoundError, version
 import numpy as np
 
 from simlidar import se3
+from simlidar.dataset import deskew_times
 
 log = logging.getLogger(__name__)
 
@@ -169,24 +170,8 @@ def range_limits(min_range_m: float, max_range_m: float) -> tuple[float, float]:
 
 # ---------------------------------------------------------------- the pose-instant convention
 def scan_times(sequence, frame) -> np.ndarray | None:
-    """A frame's per-point times since its sweep start, (N,) float64 s, or None for an undistorted scan.
-
-    None when the frame has no times, when they are all equal (nothing to de-skew
-    with), or when the sequence's manifest says it was simulated without motion
-    distortion: those times are the firing times of an instantaneous scan, and
-    de-skewing it with them would distort it.
-    """
-    manifest = getattr(sequence, "manifest", None) or {}
-    if manifest.get("motion_distortion") is False:
-        return None
-    t = frame.time_s
-    if t is None:
-        return None
-    t = np.asarray(t, dtype=np.float64)
-    finite = t[np.isfinite(t)]
-    if len(finite) == 0 or not finite.max() > finite.min():
-        return None
-    return t
+    """A frame's per-point times for de-skewing (``simlidar.dataset.deskew_times``)."""
+    return deskew_times(sequence, frame)
 
 
 def pose_instant(times: np.ndarray | None, deskewed_to: float | None) -> float:
