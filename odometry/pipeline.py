@@ -495,6 +495,53 @@ class Odometry:
         diag.singular = result.singular
 
 
+@dataclass(frozen=True)
+class DegenerateStretch:
+    """Consecutive frames whose registration was weakly constrained (flagged degenerate or remapped).
+
+    first, last: frame numbers (inclusive). direction: (3,) unit mean weakest translation
+    direction over the stretch, in the lidar frame. min_eigenvalue: the smallest translational
+    eigenvalue per match in it. remapped: frames whose update kept the prior in a direction.
+    """
+
+    first: int
+    last: int
+    direction: np.ndarray
+    min_eigenvalue: float
+    remapped: int
+
+    def describe(self) -> str:
+        x, y, z = self.direction
+        axis = ("along x (forward)", "along y (sideways)", "along z (up)")[int(np.nanargmax(np.abs(self.direction)))]
+        span = f"frame {self.first}" if self.first == self.last else f"frames {self.first}-{self.last}"
+        return (f"{span}: weakest direction ({x:+.2f}, {y:+.2f}, {z:+.2f}), mostly {axis}; smallest eigenvalue "
+                f"{self.min_eigenvalue:.2g}" + (f"; prior kept on {self.remapped} frames" if self.remapped else ""))
+
+
+def degenerate_stretches(diagnostics: list[FrameDiagnostics], min_gap: int = 1) -> list[DegenerateStretch]:
+    """The runs of degenerate (or remapped) frames, merged across gaps shorter than ``min_gap`` frames."""
+    weak = [d for d in diagnostics if d.degenerate or d.remapped]
+    out: list[list[FrameDiagnostics]] = []
+    for d in weak:
+        if out and d.frame - out[-1][-1].frame <= min_gap:
+            out[-1].append(d)
+        else:
+            out.append([d])
+    stretches = []
+    for run in out:
+        dirs = np.array([d.weakest_direction for d in run if np.all(np.isfinite(d.weakest_direction))])
+        if len(dirs):
+            dirs *= np.sign(dirs @ dirs[0])[:, None]  # eigenvectors have no sign: align them first
+            mean = dirs.mean(axis=0)
+            mean /= np.linalg.norm(mean)
+        else:
+            mean = np.full(3, np.nan)
+        eig = [d.translation_eigenvalues[0] for d in run if np.isfinite(d.translation_eigenvalues[0])]
+        stretches.append(DegenerateStretch(run[0].frame, run[-1].frame, mean, float(min(eig, default=np.nan)),
+                                           sum(d.remapped > 0 for d in run)))
+    return stretches
+
+
 # ---------------------------------------------------------------- sequences and files
 @dataclass
 class OdometryRun:
