@@ -75,10 +75,12 @@ def alignment(length_total: float, start_curve: float, curve_len: float, radius:
     """Centre-line samples: (n,) arc length, (n, 3) points, (n,) heading, rad.
 
     Straight, then a left curve of ``radius`` (0: none) over ``curve_len`` m
-    from ``start_curve``, then straight; z rises at ``grade``.
+    from ``start_curve``, then straight; z rises at ``grade``. Sample i is at
+    exactly ``i * step`` m (the last within ``step / 2`` of ``length_total``): the
+    helpers below find a place's sample as ``round(s / step)``.
     """
     n = int(round(length_total / step)) + 1
-    s = np.linspace(0.0, length_total, n)
+    s = step * np.arange(n)
     curv = 1.0 / radius if radius > 0 else 0.0
     heading = np.clip(s - start_curve, 0.0, curve_len) * curv
     mid_heading = 0.5 * (heading[1:] + heading[:-1])
@@ -161,13 +163,17 @@ def add_bore(mb: MeshBuilder, p: Bore | Params, s: np.ndarray, centre: np.ndarra
     half = p.width_m / 2
     road_half = half - p.walkway_width_m
     edge = lat_side[0]
+    # The portals as built: the samples nearest s_in and s_out, where the lining starts and
+    # ends and the cliff faces stand. The hill covers every ring of the lining, whichever
+    # side of s_in / s_out (up to STEP_M / 2 away) the end rings fall on.
+    idx = slice_rows(s_in, s_out)
+    s_a, s_b = s[idx[0]], s[idx[-1]]
 
     def hill_height(idx, lv):
-        return np.maximum(land_height(idx, lv), _hill(s[idx], lv, p, s_in, s_out))
+        return np.maximum(land_height(idx, lv), _hill(s[idx], lv, p, s_a, s_b))
 
     # The hill over the bore, and the cliff faces at the portals (between the land's and
     # the bore's outline below, and the hill's section above).
-    idx = slice_rows(s_in, s_out)
     hill_lat = np.concatenate([-lat_side[::-1], np.linspace(-edge, edge, 5)[1:-1], lat_side])
     hill_prof = section(idx, hill_lat, hill_height(idx, hill_lat))
     mb.add(*g.sweep(centre[idx], left[idx], hill_prof), mb.new_object("ground"))
