@@ -75,10 +75,12 @@ def alignment(length_total: float, start_curve: float, curve_len: float, radius:
     """Centre-line samples: (n,) arc length, (n, 3) points, (n,) heading, rad.
 
     Straight, then a left curve of ``radius`` (0: none) over ``curve_len`` m
-    from ``start_curve``, then straight; z rises at ``grade``.
+    from ``start_curve``, then straight; z rises at ``grade``. Sample i is at
+    exactly ``i * step`` m (the last within ``step / 2`` of ``length_total``): the
+    helpers below find a place's sample as ``round(s / step)``.
     """
     n = int(round(length_total / step)) + 1
-    s = np.linspace(0.0, length_total, n)
+    s = step * np.arange(n)
     curv = 1.0 / radius if radius > 0 else 0.0
     heading = np.clip(s - start_curve, 0.0, curve_len) * curv
     mid_heading = 0.5 * (heading[1:] + heading[:-1])
@@ -161,13 +163,17 @@ def add_bore(mb: MeshBuilder, p: Bore | Params, s: np.ndarray, centre: np.ndarra
     half = p.width_m / 2
     road_half = half - p.walkway_width_m
     edge = lat_side[0]
+    # The portals as built: the samples nearest s_in and s_out, where the lining starts and
+    # ends and the cliff faces stand. The hill covers every ring of the lining, whichever
+    # side of s_in / s_out (up to STEP_M / 2 away) the end rings fall on.
+    idx = slice_rows(s_in, s_out)
+    s_a, s_b = s[idx[0]], s[idx[-1]]
 
     def hill_height(idx, lv):
-        return np.maximum(land_height(idx, lv), _hill(s[idx], lv, p, s_in, s_out))
+        return np.maximum(land_height(idx, lv), _hill(s[idx], lv, p, s_a, s_b))
 
     # The hill over the bore, and the cliff faces at the portals (between the land's and
     # the bore's outline below, and the hill's section above).
-    idx = slice_rows(s_in, s_out)
     hill_lat = np.concatenate([-lat_side[::-1], np.linspace(-edge, edge, 5)[1:-1], lat_side])
     hill_prof = section(idx, hill_lat, hill_height(idx, hill_lat))
     mb.add(*g.sweep(centre[idx], left[idx], hill_prof), mb.new_object("ground"))
@@ -232,7 +238,7 @@ def build(p: Params) -> Scene:
     add_bore(mb, p, s, centre, left, heading, s_in, s_out, lat_side, land_height, road_obj)
 
     n_features = add_fittings(mb, p, centre, left, heading, s_in, s_out)
-    _approach_furniture(mb, p, rng, s, centre, left, heading, s_in, s_out)
+    _approach_furniture(mb, p, s, centre, left, heading, s_in, s_out, lat_side, land_height)
 
     # The path: the right lane, offset from the centre-line.
     lane = centre[:, :2] - p.lane_offset_m * left[:, :2]
@@ -321,19 +327,38 @@ def add_fittings(mb: MeshBuilder, p: Bore | Params, centre: np.ndarray, left: np
     return count
 
 
-def _approach_furniture(mb, p, rng, s, centre, left, heading, s_in, s_out) -> None:
-    """Signs announcing the tunnel and a few lamp posts on the approaches."""
+def land_surface_height(lat_side: np.ndarray, land_height, i: int, lat: float) -> float:
+    """Height above the road level of the land beside an open road as ``add_open_road`` meshes
+    it (linear between the laterals ``lat_side``, not ``land_height`` itself: its ditch is
+    narrower than their spacing) at sample ``i``, ``lat`` m left of the centre-line (negative:
+    right), beyond the road's edge; exact on the mesh's rows (every ``SLICE_M``), within
+    millimetres between them (the land varies slowly along the road)."""
+    side = np.copysign(lat_side, lat)
+    return float(np.interp(abs(lat), lat_side, land_height(np.array([i]), side)[0]))
+
+
+POST_FOOT_M = 0.2  # posts beside the road stand this deep in the land
+
+
+def _approach_furniture(mb, p, s, centre, left, heading, s_in, s_out, lat_side, land_height) -> None:
+    """Signs announcing the tunnel and a few lamp posts on the approaches, in the land beyond
+    the ditch: their posts reach ``POST_FOOT_M`` into it, plates and lamps at their heights
+    above the road."""
     half = p.width_m / 2
     for s_sign, toward in ((s_in - 40.0, 1.0), (s_out + 40.0, -1.0)):
         i = int(round(np.clip(s_sign, 0, s[-1]) / STEP_M))
         for side in (-1.0, 1.0):
-            q = centre[i] + side * (half + 2.0) * left[i]
-            post, plate = props.sign(2.8, (0.05, 1.2, 0.9))
+            lat = side * (half + 2.0)
+            foot = land_surface_height(lat_side, land_height, i, lat) - POST_FOOT_M
+            q = centre[i] + lat * left[i] + foot * np.array([0.0, 0.0, 1.0])
+            post, plate = props.sign(2.8 - foot, (0.05, 1.2, 0.9))
             yaw = heading[i] + (np.pi if toward > 0 else 0.0)
             mb.add_object(*g.place(post, yaw, q), "pole")
             mb.add_object(*g.place(plate, yaw, q), "sign")
-    for a, b in ((0.0, s_in - 10.0), (s_out + 10.0, s[-1])):
+    for a, b in ((0.0, s_in - 10.0), (s_out + 10.0, s[-1] - 5.0)):  # not at the world's end
         for sl in np.arange(a + 10.0, b, 30.0):
             i = int(round(sl / STEP_M))
-            q = centre[i] + (half + 1.5) * left[i]
-            mb.add_object(*g.place(props.street_light(8.0, 2.0), heading[i] - np.pi / 2, q), "pole")
+            lat = half + 1.5
+            foot = land_surface_height(lat_side, land_height, i, lat) - POST_FOOT_M
+            q = centre[i] + lat * left[i] + foot * np.array([0.0, 0.0, 1.0])
+            mb.add_object(*g.place(props.street_light(8.0 - foot, 2.0), heading[i] - np.pi / 2, q), "pole")

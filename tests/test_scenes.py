@@ -16,7 +16,9 @@ import trimesh
 
 import scenes
 from scenes import LABELS, build_scene
+from scenes.families import draw_family_params
 from simlidar.degeneracy import degeneracy
+from simlidar.raycast import Raycaster
 from simlidar.sensor import load_sensor
 from simlidar.sweep import SensorInsideGeometry, SweepSimulator
 from simlidar.world import World
@@ -318,3 +320,23 @@ def test_bare_straight_bore_constrains_its_axis_only_through_the_grade():
     (d,) = _degeneracy_at("tunnel", [t], scene=s, sim=sim)
     assert d.translation_eigenvalues[0] <= np.sin(np.arctan(grade)) ** 2 * (1 + 1e-6)
     assert abs(d.weakest_translation @ _tunnel_axis_in_lidar(s, t)) > np.cos(np.radians(1))
+
+
+# ---------------------------------------------------------------- posts
+@pytest.mark.parametrize("name, family_seed", [("tunnel", None), ("tunnel", 0), ("canyon", None), ("canyon", 101)])
+def test_posts_beside_the_road_stand_in_the_ground(name, family_seed):
+    # Every lamp post and sign post ("pole") reaches the surface under it, whatever that is
+    # (a sidewalk, the land beyond a ditch, on a grade and a curve), and is not sunk deeper
+    # than 0.45 m: rays cast down at each vertex of its lowest ring, through everything but
+    # posts, plates and lamps, meet the surface 0 - 0.45 m above the vertex.
+    s = default_scene(name) if family_seed is None else build_scene(name, **draw_family_params(name, family_seed))
+    keep = ~np.isin(s.label_of_face(), ["pole", "sign", "light"])
+    rc = Raycaster(s.vertices, s.faces[keep], threads=1)
+    poles = np.flatnonzero(np.asarray(s.object_labels) == "pole")
+    assert len(poles) >= 4
+    for obj in poles:
+        v = s.vertices[np.unique(s.faces[s.face_object_id == obj])]
+        feet = v[v[:, 2] < v[:, 2].min() + 0.01]
+        hits = rc.cast(feet + [0.0, 0.0, 5.0], np.tile([0.0, 0.0, -1.0], (len(feet), 1)), 20.0)
+        depth = 5.0 - hits.distance  # the surface's height above the foot
+        assert depth.min() >= -0.01 and depth.max() <= 0.45, (obj, feet.mean(axis=0).round(1), depth.round(3))
