@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 from simlidar import se3
 
 from .config import OdometryConfig
-from .constraints import weakest_translation
+from .constraints import restore_constraints, weakest_translation
 from .estimation import point_to_plane_step
 from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
 
@@ -45,16 +45,20 @@ class Target:
     """The scan registered against: points, a k-d tree over them, and their normals.
 
     points: (N, 3) m. normals: (N, 3) unit, or filled on demand by
-    ``estimate_normals(indices) -> (len(indices), 3)`` (a raw scan or a map, where
-    computing every normal would be wasted work); a nan normal means "no plane
-    here" and the ICP drops matches to it.
+    ``estimate_normals(indices) -> ((len(indices), 3) normals, (len(indices),) uncertain or None)``
+    (a raw scan or a map, where computing every normal would be wasted work); a nan
+    normal means "no plane here" and the ICP drops matches to it. ``uncertain`` (N,)
+    marks normals the NCF found too uncertain (a map's): the ICP drops those matches
+    unless they are the last evidence of a direction (``odometry.constraints``).
+    ``known`` (N,) marks the rows estimated (both may be shared with a map's cache).
     """
 
     points: np.ndarray
     tree: cKDTree
     normals: np.ndarray
-    estimate_normals: Callable[[np.ndarray], np.ndarray] | None = None
-    known: np.ndarray | None = None  # (N,) bool: rows whose normal has been estimated (shared with a map's cache)
+    estimate_normals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]] | None = None
+    known: np.ndarray | None = None
+    uncertain: np.ndarray | None = None
 
     def normals_at(self, index: np.ndarray) -> np.ndarray:
         if self.estimate_normals is not None:
@@ -63,7 +67,9 @@ class Target:
             missing = ~self.known[index]
             if missing.any():
                 rows = np.unique(index[missing])
-                self.normals[rows] = self.estimate_normals(rows)
+                self.normals[rows], unsure = self.estimate_normals(rows)
+                if self.uncertain is not None and unsure is not None:
+                    self.uncertain[rows] = unsure
                 self.known[rows] = True
         return self.normals[index]
 
@@ -166,6 +172,16 @@ def register(
         if planes_optional:
             m = m.select(np.isfinite(target.normals_at(m.target_index)[:, 0]))
             counts["plane"] = len(m)
+            if target.uncertain is not None:
+                sure = ~target.uncertain[m.target_index]
+                keep = sure
+                if config.min_constraint_eigenvalue > 0 and not sure.all():
+                    keep = restore_constraints(moved[m.source_index] - centre, target.normals_at(m.target_index),
+                                               np.ones(len(m), dtype=bool), sure, config.min_constraint_eigenvalue,
+                                               config.rotation_scale_m)
+                counts["ncf"] = int(sure.sum())
+                counts["restored"] = int((keep & ~sure).sum())
+                m = m.select(keep)
         if source.gcr_threshold_m is None and source.gcr_thresholds is not None:
             # GCR thresholds from the target's normals at these first matches, turned into the
             # source frame (a point without a match now has no bound: inf, the rejector abstains)

@@ -144,6 +144,7 @@ class LocalMap:
         # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
         self._normals = np.zeros((0, 3))
         self._known = np.zeros(0, dtype=bool)
+        self._uncertain = np.zeros(0, dtype=bool)  # the NCF's verdict on each estimated normal
         self._voxel_keys = np.zeros(0, dtype=np.int64)  # sorted occupied voxels
         self._voxel_counts = np.zeros(0, dtype=np.int64)
         self._tree = background().submit(cKDTree, self.points)
@@ -188,6 +189,7 @@ class LocalMap:
         self._beams = np.concatenate([self._beams, beams / np.linalg.norm(beams, axis=1, keepdims=True)])
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
+        self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
         # a kNN neighbourhood (< 1 voxel across) of a point next to a changed voxel may have changed
         self._known[in_sorted(self._keys, neighbourhood_keys(np.unique(keys)))] = False
         self._recount(np.concatenate([self._voxel_keys, keys]),
@@ -203,7 +205,7 @@ class LocalMap:
         drop = in_sorted(self._keys, self._voxel_keys[far])
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
         self.points, self._keys, self._beams = self.points[~drop], self._keys[~drop], self._beams[~drop]
-        self._normals, self._known = self._normals[~drop], self._known[~drop]
+        self._normals, self._known, self._uncertain = self._normals[~drop], self._known[~drop], self._uncertain[~drop]
         return int(drop.sum())
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
@@ -220,19 +222,19 @@ class LocalMap:
         tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
-        def normals_of(rows: np.ndarray) -> np.ndarray:
+        def normals_of(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
             if k < 3:
-                return np.full((len(rows), 3), np.nan)
+                return np.full((len(rows), 3), np.nan), None
             # (a normal's sign does not matter to a point-to-plane residual: r and J flip together)
             est = estimate_normals(points, k=k, query_points=points[rows], tree=tree)
             n = est.normals.copy()
-            valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)
-            if self.ncf_c_tau_rad2 is not None:
-                nc = normal_covariance_along_beams(points[est.neighbour_indices], beams[est.neighbour_indices],
-                                                   self.noise_std_m, pca=est)
-                valid &= ncf_keep(nc, self.ncf_c_tau_rad2)
-            n[~valid] = np.nan
-            return n
+            n[~plane_normals_valid(est, self.noise_std_m, self.max_curvature)] = np.nan
+            if self.ncf_c_tau_rad2 is None:
+                return n, None
+            nc = normal_covariance_along_beams(points[est.neighbour_indices], beams[est.neighbour_indices],
+                                               self.noise_std_m, pca=est)
+            return n, ~ncf_keep(nc, self.ncf_c_tau_rad2)
 
-        return Target(points, tree, self._normals, normals_of, self._known)
+        return Target(points, tree, self._normals, normals_of, self._known,
+                      self._uncertain if self.ncf_c_tau_rad2 is not None else None)
 

@@ -115,11 +115,13 @@ class CleanScan:
     points: (N, 3) finite points within the range limits, sensor frame, m.
     times_s: (N,) per-point time since the sweep start, s, or None.
     rings: (N,) int ring per point, or None.
+    kept_rows: (N,) the rows of the input they came from.
     """
 
     points: np.ndarray
     times_s: np.ndarray | None
     rings: np.ndarray | None
+    kept_rows: np.ndarray
 
 
 def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray | None, config: OdometryConfig,
@@ -134,7 +136,7 @@ def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray
     r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
     keep = finite & (r >= config.min_range_m) & (r <= config.max_range_m)
     out = CleanScan(points[keep], None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep],
-                    None if rings is None else np.asarray(rings)[keep])
+                    None if rings is None else np.asarray(rings)[keep], np.flatnonzero(keep))
     if config.kitti_vertical_correction_deg:
         out.points = correct_kitti_vertical_angle(out.points, config.kitti_vertical_correction_deg)
     if diag is not None:
@@ -175,8 +177,8 @@ def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
         return Target(scan.points, cKDTree(scan.points), scan.normals)
     raw, tree, k = scan.raw_points, scan.raw_tree, config.normal_neighbours
 
-    def normals_of(rows: np.ndarray) -> np.ndarray:
-        return estimate_normals(raw, k=k, query_points=raw[rows], tree=tree).normals
+    def normals_of(rows: np.ndarray) -> tuple[np.ndarray, None]:
+        return estimate_normals(raw, k=k, query_points=raw[rows], tree=tree).normals, None
 
     return Target(raw, tree, np.full(raw.shape, np.nan), normals_of)
 

@@ -56,7 +56,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from simlidar import se3
 
@@ -162,49 +161,36 @@ def true_motion(poses: np.ndarray, k: int) -> np.ndarray:
 
 
 def prepare_scan(sequence, k: int, config, sensor) -> PreparedScan:
-    """Clean, de-skew (true motion) and filter frame k of a simulated sequence."""
+    """Clean, de-skew (true motion) and filter frame k of a simulated sequence, with the odometry's stages."""
     from odometry.deskew import deskew
     from odometry.filters import filter_scan
+    from odometry.pipeline import clean_scan
 
     frame = sequence[k]
-    pts = frame.points
-    finite = np.all(np.isfinite(pts), axis=1)
-    r = np.linalg.norm(np.where(finite[:, None], pts, 0.0), axis=1)
-    rows = np.flatnonzero(finite & (r >= config.min_range_m) & (r <= config.max_range_m))
-    times = np.asarray(frame.time_s, dtype=np.float64)[rows]
+    clean = clean_scan(frame.points, frame.time_s, frame.ring, config)
+    rows = clean.kept_rows
+    times = clean.times_s
     period = float(np.diff(sequence.times[:2])[0]) if len(sequence.times) > 1 else sensor.sweep_period_s
-    raw = deskew(pts[rows], times, true_motion(sequence.poses, k), period)
-    scan = filter_scan(raw, config, np.asarray(frame.ring)[rows], sensor.range_noise_std_m, raw_times_s=times)
+    raw = deskew(clean.points, times, true_motion(sequence.poses, k), period)
+    scan = filter_scan(raw, config, clean.rings, sensor.range_noise_std_m, raw_times_s=times)
     truth = truth_of_points(scan.points, scan.raw_tree, rows, frame.fields)
     return PreparedScan(k, raw, rows, scan, truth, frame.fields)
 
 
 def make_source(scan: PreparedScan, config, sensor):
-    """``odometry.icp.Source`` with GCR thresholds (inf where no neighbour beam bounds them)."""
-    from odometry.gcr import gcr_threshold_m
-    from odometry.icp import Source
+    """``odometry.icp.Source`` with GCR thresholds (inf where no neighbour beam bounds them): the odometry's own."""
+    from odometry.pipeline import make_source as odometry_source
 
-    f = scan.filtered
-    thr = gcr_threshold_m(f.points, f.normals, f.rings, sensor, config.gcr_formula, config.gcr_noise_floor_m)
-    thr[np.isnan(thr)] = np.inf
-    return Source(f.points, f.normals, thr)
+    return odometry_source(scan.filtered, config, sensor, with_gcr=True)
 
 
 def make_target(scan: PreparedScan, kind: str, config):
-    """``odometry.icp.Target`` and its ``PointTruth``: the filtered scan, or the raw one (normals on demand)."""
-    from odometry.icp import Target
-    from odometry.normals import estimate_normals
+    """``odometry.icp.Target`` and its ``PointTruth``: the filtered scan, or the raw one (normals on demand),
+    built as the odometry builds them (``odometry.pipeline.scan_target``)."""
+    from odometry.pipeline import scan_target
 
-    f = scan.filtered
-    if kind == "filtered":
-        return Target(f.points, cKDTree(f.points), f.normals), scan.truth
-    raw, tree, k = scan.raw_points, f.raw_tree, config.normal_neighbours
-
-    def normals_of(rows: np.ndarray) -> np.ndarray:
-        return estimate_normals(raw, k=k, query_points=raw[rows], tree=tree).normals
-
-    target = Target(raw, tree, np.full(raw.shape, np.nan), normals_of)
-    return target, truth_of_rows(scan.sidecar, scan.raw_rows)
+    target = scan_target(scan.filtered, config.replace(match_target=kind))
+    return target, (scan.truth if kind == "filtered" else truth_of_rows(scan.sidecar, scan.raw_rows))
 
 
 # ---------------------------------------------------------------- rejection against the truth
