@@ -458,8 +458,8 @@ class Odometry:
         st.target_motion = T if redo else T_deskew
         if st.local_map is not None:
             st.local_map.update(map_points(scan, pose), pose[:3, 3])
-        seconds["deskew" if st.local_map is None else "map"] = (
-            seconds.get("deskew", 0.0) if st.local_map is None else 0.0) + time.perf_counter() - t
+        stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
+        seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t
 
     def _target(self) -> Target:
         st = self.state

@@ -129,17 +129,16 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
     from odometry.filters import voxel_centroids
     from odometry.ncf import IsotropicNoise, RangeNoise, normal_covariance
     from odometry.normals import angle_between_normals_rad, estimate_normals
+    from odometry.pipeline import clean_scan
 
     from .rejector_study import true_motion
 
     sensor = sequence.sensor
     frame = sequence[k]
-    pts = frame.points
-    finite = np.all(np.isfinite(pts), axis=1)
-    r = np.linalg.norm(np.where(finite[:, None], pts, 0.0), axis=1)
-    rows = np.flatnonzero(finite & (r >= config.min_range_m) & (r <= config.max_range_m))
+    clean = clean_scan(frame.points, frame.time_s, None, config)
+    rows = clean.kept_rows
     period = float(np.diff(sequence.times[:2])[0])
-    raw = deskew(pts[rows], np.asarray(frame.time_s)[rows], true_motion(sequence.poses, k), period)
+    raw = deskew(clean.points, clean.times_s, true_motion(sequence.poses, k), period)
     centroids = voxel_centroids(raw, config.voxel_size_m)
     if max_points is not None and len(centroids) > max_points:
         centroids = centroids[np.sort(rng.choice(len(centroids), max_points, replace=False))]
