@@ -218,7 +218,8 @@ def test_cli_bad_input(tmp_path, capsys):
         (["--mesh", str(tmp_path / "broken.ply"), "--poses", str(poses)], "broken.ply"),
         (["--mesh", str(tmp_path / "missing.ply"), "--poses", str(poses)], "missing.ply: mesh file does not exist"),
         (["--mesh", str(mesh), "--poses", str(bad_poses)], "bad.txt:1"),
-        (["--mesh", str(tmp_path / "block.ply"), "--poses", str(poses)], "inside geometry"),
+        (["--mesh", str(tmp_path / "block.ply"), "--poses", str(poses), "--strict-inside-check"],
+         "frame 1: sensor at (-1.50, 0.00, 0.00) m is inside geometry: 200 of 200 probe rays hit the back face"),
         (["--mesh", str(mesh), "--poses", str(poses), "--sensor", "nope"], "unknown sensor preset 'nope'"),
     ]
     for extra, words in cases:
@@ -278,3 +279,64 @@ def test_check_clear_uses_each_frame(tmp_path):
         simulate_sequence(world, traj, load_preset("vlp16"), tmp_path / "s", frames=5)
     assert list(tmp_path.iterdir()) == []
     assert SweepSimulator  # imported for the error type's module
+
+
+# ------------------------------------------------------------------ enclosed worlds from a user's mesh
+@pytest.mark.parametrize("winding", ["outward", "inward"])
+def test_cli_simulates_a_closed_room_of_either_winding(tmp_path, capsys, caplog, winding):
+    # A 10 x 8 x 3 m room, floor at z = 0, the lidar at 1.8 m moving along x: modelled as a solid box
+    # (trimesh's outward normals, every wall seen from behind) or with its faces turned inwards.
+    import trimesh
+
+    m = trimesh.creation.box((10.0, 8.0, 3.0))
+    m.apply_translation((0.0, 0.0, 1.5))
+    if winding == "inward":
+        m.invert()
+    m.export(tmp_path / "room.ply")
+    T = np.tile(np.eye(4), (4, 1, 1))
+    T[:, 0, 3] = np.linspace(-2.0, 2.0, 4)
+    T[:, 1, 3] = 0.7
+    T[:, 2, 3] = 1.8
+    (tmp_path / "poses.txt").write_text(format_kitti_poses(T))
+    lo, hi = np.array([-5.0, -4.0, 0.0]), np.array([5.0, 4.0, 3.0])
+    sigma = 0.02
+    out = tmp_path / "seq"
+    assert salo(["simulate", "--mesh", str(tmp_path / "room.ply"), "--poses", str(tmp_path / "poses.txt"),
+                 "--sensor", "vlp16", "--noise-std", str(sigma), "--no-motion-distortion", "--seed", "2",
+                 "--out", str(out)]) == 0
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    seq = open_sequence(out)
+    check = seq.manifest["inside_check"]
+    assert check["mode"] == "warn"
+    if winding == "outward":
+        assert check["enclosed_frames"] == 4 and check["probe_rays_back_face"] == 200
+        assert len(warned) == 1 and "sees mostly back faces at 4 of 4 frames" in warned[0]
+        assert "sensor at (-2.00, 0.70, 1.80) m, 200 of 200 probe rays hit the back face" in warned[0]
+    else:
+        assert check["enclosed_frames"] == 0 and warned == []
+    T_first = np.eye(4)
+    T_first[:3, :4] = np.reshape(seq.manifest["T_world_first_lidar"], (3, 4))
+    residuals = []
+    for k, frame in enumerate(seq):
+        assert len(frame.points) == seq.sensor.rays_per_sweep  # closed room: every beam returns
+        T_k = T_first @ seq.poses[k]
+        assert np.allclose(T_k, T[k], atol=1e-9)
+        d = frame.points / np.linalg.norm(frame.points, axis=1, keepdims=True)  # beams, sensor frame
+        d_world = d @ T_k[:3, :3].T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_axis = np.where(d_world > 0, (hi - T_k[:3, 3]) / d_world,
+                              np.where(d_world < 0, (lo - T_k[:3, 3]) / d_world, np.inf))
+        wall = t_axis.min(axis=1)  # distance to the wall along each beam
+        axis = t_axis.argmin(axis=1)
+        assert np.abs(frame.field("true_range_m") - wall).max() < 1e-4  # float32 on disk
+        residuals.append(frame.field("range_m") - wall)
+        # the normal is the wall's, turned to face the sensor
+        n = frame.field("normal")
+        n_true = np.zeros_like(n)
+        rows = np.arange(len(n))
+        n_true[rows, axis] = -np.sign(d[rows] @ T_k[:3, :3].T)[rows, axis]
+        assert np.abs(n @ T_k[:3, :3].T - n_true).max() < 1e-5
+        assert np.all(np.einsum("ij,ij->i", n, frame.field("true_xyz")) < 0)
+    res = np.concatenate(residuals)
+    assert abs(res.mean()) < 5 * sigma / np.sqrt(len(res))
+    assert abs(res.std() / sigma - 1) < 0.05

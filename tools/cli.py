@@ -54,6 +54,12 @@ def _add_simulate(sub) -> None:
         "(interpolated on SE(3) in between)",
     )
     world.add_argument("--times", type=Path, help="times of the --poses lines, s (default: 1/rate apart)")
+    world.add_argument(
+        "--strict-inside-check",
+        action="store_true",
+        help="refuse a pose whose probe rays mostly hit back faces, as for a procedural scene (by default a "
+        "--mesh only warns: rooms with outward normals and meshes with inconsistent normals look like that)",
+    )
     p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
     p.add_argument("--frames", type=whole_number(1),
                    help="number of sweeps (default: one per pose, or 100 along a scene)")
@@ -147,6 +153,7 @@ def _run_simulation(world, trajectory, sensor, args, frames, info, where, t_star
             info={**info, "noise_std_m": sensor.range_noise_std_m},
             force=args.force,
             on_frame=lambda k, scan: bar.update(1),
+            strict_inside=True if getattr(args, "strict_inside_check", False) else None,
         )
     except SensorInsideGeometry as exc:
         raise CommandError(f"{where}: {exc}") from None
