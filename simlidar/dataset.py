@@ -140,18 +140,33 @@ def camera_poses_to_lidar(poses_cam: np.ndarray, Tr_cam_velo: np.ndarray) -> np.
     return np.linalg.inv(L[0]) @ L
 
 
+BIN_POINT_BYTES = 16  # float32 x y z intensity
+
+
+def check_bin_size(path: Path, size: int) -> None:
+    """Refuse a ``.bin`` of ``size`` bytes that is not a whole number of 16-byte points."""
+    if size % BIN_POINT_BYTES:
+        raise DatasetError(
+            f"{path}: size {size:,} bytes is not a whole number of {BIN_POINT_BYTES}-byte points "
+            f"(float32 x y z intensity): {size // BIN_POINT_BYTES:,} points and {size % BIN_POINT_BYTES} "
+            "bytes over (truncated or not a KITTI scan?)"
+        )
+
+
 def read_bin(path: str | Path) -> np.ndarray:
-    """A KITTI ``.bin`` scan -> (N, 4) float32 x y z intensity."""
+    """A KITTI ``.bin`` scan -> (N, 4) float32 x y z intensity.
+
+    The file's size must be a multiple of 16 bytes (``np.fromfile`` alone would
+    silently drop a partial float at the end).
+    """
     path = Path(path)
     try:
-        raw = np.fromfile(path, dtype="<f4")
+        with open(path, "rb") as fh:
+            check_bin_size(path, os.fstat(fh.fileno()).st_size)
+            raw = np.fromfile(fh, dtype="<f4")
     except OSError as exc:
         raise DatasetError(f"{path}: cannot read scan ({exc.strerror})") from None
-    if raw.size % 4:
-        raise DatasetError(
-            f"{path}: size {raw.size * 4} bytes is not a whole number of 16-byte points "
-            "(float32 x y z intensity)"
-        )
+    check_bin_size(path, raw.size * 4)  # the file changed under us
     return raw.reshape(-1, 4)
 
 
@@ -494,6 +509,13 @@ def _scan_list(folder: Path, exts: tuple[str, ...]) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.suffix in exts and not p.name.startswith("."))
 
 
+def _check_bin_sizes(scans: list[Path]) -> None:
+    """Refuse, when a sequence is opened, a ``.bin`` that is not whole 16-byte points (one stat each)."""
+    for f in scans:
+        if f.suffix == ".bin":
+            check_bin_size(f, f.stat().st_size)
+
+
 def _open_salo(path: Path, sensor: LidarModel | None) -> Sequence:
     try:
         manifest = json.loads((path / "manifest.json").read_text())
@@ -507,6 +529,7 @@ def _open_salo(path: Path, sensor: LidarModel | None) -> Sequence:
     missing = [p for p in scans + cars if not p.is_file()]
     if missing:
         raise DatasetError(f"{missing[0]}: missing, the manifest lists {n} frames")
+    _check_bin_sizes(scans)
     poses = read_kitti_poses(path / "poses.txt")
     times = read_times(path / "times.txt")
     if len(poses) != n or len(times) != n:
@@ -522,6 +545,7 @@ def _open_kitti(path: Path, sensor: LidarModel | None, poses_file) -> Sequence:
     scans = _scan_list(path / "velodyne", (".bin",))
     if not scans:
         raise DatasetError(f"{path / 'velodyne'}: no .bin scans")
+    _check_bin_sizes(scans)
     times = read_times(path / "times.txt") if (path / "times.txt").is_file() else None
     poses = None
     if poses_file is None:
@@ -543,6 +567,7 @@ def _open_scans(path: Path, sensor: LidarModel | None, poses_file) -> Sequence:
     scans = _scan_list(folder, (".bin", ".ply"))
     if not scans:
         raise DatasetError(f"{path}: no .bin or .ply scans (and no manifest.json or calib.txt)")
+    _check_bin_sizes(scans)
     if sensor is None:
         for name in ("sensor.yaml", "sensor.yml"):
             if (path / name).is_file():

@@ -14,7 +14,9 @@ from simlidar.dataset import (
     camera_poses_to_lidar,
     format_kitti_poses,
     open_sequence,
+    read_bin,
     read_kitti_poses,
+    write_bin,
     write_ply_scan,
 )
 from simlidar.sensor import load_preset
@@ -108,12 +110,15 @@ def test_unfinished_or_damaged_folders_are_refused(tmp_path):
     with pytest.raises(DatasetError, match="000002.npy: missing"):
         open_sequence(out)
     simulate(tmp_path / "s2")
-    with open(tmp_path / "s2/velodyne/000001.bin", "ab") as fh:
-        fh.write(b"\0" * 5)
-    with pytest.raises(DatasetError, match="000001.bin.*not a whole number"):
-        open_sequence(tmp_path / "s2")[1]
+    with open(tmp_path / "s2/velodyne/000001.bin", "r+b") as fh:  # same size, other content
+        fh.seek(100)
+        fh.write(b"\xff" * 4)
     with pytest.raises(DatasetError, match="checksum"):
         open_sequence(tmp_path / "s2").verify()
+    with open(tmp_path / "s2/velodyne/000001.bin", "ab") as fh:
+        fh.write(b"\0" * 5)
+    with pytest.raises(DatasetError, match="000001.bin: size .* not a whole number"):
+        open_sequence(tmp_path / "s2")
 
 
 def test_kitti_camera_to_lidar_hand_made():
@@ -340,3 +345,41 @@ def test_cli_simulates_a_closed_room_of_either_winding(tmp_path, capsys, caplog,
     res = np.concatenate(residuals)
     assert abs(res.mean()) < 5 * sigma / np.sqrt(len(res))
     assert abs(res.std() / sigma - 1) < 0.05
+
+
+# ------------------------------------------------------------------ .bin files
+def test_bin_whose_size_is_not_whole_points_is_refused_on_every_path(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    good = rng.normal(0, 10, (6250, 3))
+    bad_bytes = np.zeros(100_003, dtype=np.uint8).tobytes()  # np.fromfile alone made 6,250 points of it
+    words = "size 100,003 bytes is not a whole number of 16-byte points"
+    # a plain scan folder
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    write_bin(scans / "000000.bin", good, np.zeros(6250))
+    (scans / "000001.bin").write_bytes(bad_bytes)
+    with pytest.raises(DatasetError, match=f"000001.bin: {words}"):
+        open_sequence(scans, sensor="vlp16")
+    with pytest.raises(DatasetError, match=f"000001.bin: {words}"):
+        read_bin(scans / "000001.bin")
+    assert read_bin(scans / "000000.bin").shape == (6250, 4)
+    # a KITTI sequence folder
+    kitti = tmp_path / "kitti"
+    (kitti / "velodyne").mkdir(parents=True)
+    (kitti / "calib.txt").write_text("Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n")
+    write_bin(kitti / "velodyne/000000.bin", good, np.zeros(6250))
+    (kitti / "velodyne/000001.bin").write_bytes(bad_bytes)
+    with pytest.raises(DatasetError, match=f"000001.bin: {words}"):
+        open_sequence(kitti)
+    # a simulated sequence
+    simulate(tmp_path / "sim")
+    (tmp_path / "sim/velodyne/000002.bin").write_bytes(bad_bytes)
+    with pytest.raises(DatasetError, match=f"000002.bin: {words}"):
+        open_sequence(tmp_path / "sim")
+    # the command line: one line, exit status 2, nothing written
+    out = tmp_path / "poses_out.txt"
+    for folder in (scans, kitti, tmp_path / "sim"):
+        code = salo(["odometry", str(folder), "--sensor", "vlp16", "--out", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
