@@ -25,10 +25,13 @@ a plain folder of ``.bin`` / ``.ply`` scans with a sensor file.
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import json
+import logging
 import os
 import shutil
+import socket
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +41,8 @@ import numpy as np
 from . import __version__, se3
 from .degeneracy import CSV_HEADER, csv_row, degeneracy
 from .sensor import LidarModel, SensorError, load_sensor, load_sensor_file
+
+log = logging.getLogger(__name__)
 
 FORMAT_NAME = "salo-sequence"
 FORMAT_VERSION = 1
@@ -265,6 +270,72 @@ def sha256_file(path: Path) -> str:
 
 
 # ---------------------------------------------------------------- writer
+def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists on this machine (a process we may not signal counts as alive)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def remove_stale_partials(out_dir: str | Path) -> list[Path]:
+    """Remove the hidden work folders a killed writer of ``out_dir`` left; returns them.
+
+    A writer builds ``.NAME.partial-PID`` beside ``out_dir`` (and, replacing an
+    old sequence, moves that to ``.NAME.old-PID`` for a moment). A process
+    killed with SIGKILL cannot clean up, so the next writer of the same
+    ``out_dir`` removes those whose process no longer runs, logging a warning
+    for each. Left alone: a folder of a live process (another writer at work),
+    of this process, with no PID in its name, whose ``INCOMPLETE`` marker names
+    another host (a shared file system: its PID means nothing here), or an
+    ``old`` one while ``out_dir`` is missing (the swap was cut between its two
+    renames: that folder is the only copy of the previous sequence).
+    """
+    out_dir = Path(out_dir)
+    removed: list[Path] = []
+    if not out_dir.parent.is_dir():
+        return removed
+    host = socket.gethostname()
+    for kind in ("partial", "old"):
+        for folder in sorted(out_dir.parent.glob(f".{glob.escape(out_dir.name)}.{kind}-*")):
+            pid_text = folder.name.rsplit("-", 1)[1]
+            if not folder.is_dir() or not pid_text.isdigit():
+                continue
+            pid = int(pid_text)
+            if pid == os.getpid() or _pid_alive(pid) or _marker_host(folder) not in (None, host):
+                continue
+            if kind == "old" and not out_dir.exists():  # killed mid-swap: the only copy of the old sequence
+                log.warning("%s holds the sequence that process %d was replacing when it stopped; %s is "
+                            "missing, so it is left for you to rename back", folder, pid, out_dir)
+                continue
+            shutil.rmtree(folder, ignore_errors=True)
+            if not folder.exists():
+                removed.append(folder)
+                log.warning("removed %s, left by process %d, which is no longer running (an interrupted "
+                            "write of %s)", folder, pid, out_dir.name)
+    return removed
+
+
+def _marker_host(folder: Path) -> str | None:
+    """The host named in a work folder's ``INCOMPLETE`` marker, or None (no marker, or none named)."""
+    try:
+        text = (folder / INCOMPLETE_MARKER).read_text(errors="replace")
+    except OSError:
+        return None
+    for line in text.splitlines():
+        key, sep, value = line.partition(":")
+        if sep and key.strip() == "host":
+            return value.strip()
+    return None
+
+
 class SequenceWriter:
     """Streams frames of a simulated sequence to disk and commits it atomically.
 
@@ -290,11 +361,13 @@ class SequenceWriter:
 
     def __enter__(self) -> SequenceWriter:
         self.out_dir.parent.mkdir(parents=True, exist_ok=True)
+        self.removed_stale = remove_stale_partials(self.out_dir)
         if self.tmp.exists():
             shutil.rmtree(self.tmp)
         (self.tmp / "velodyne").mkdir(parents=True)
         (self.tmp / "sidecar").mkdir()
-        (self.tmp / INCOMPLETE_MARKER).write_text("a sequence is being written here\n")
+        (self.tmp / INCOMPLETE_MARKER).write_text(
+            f"a sequence is being written here\nhost: {socket.gethostname()}\npid: {os.getpid()}\n")
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from simlidar.dataset import (
     open_sequence,
     read_bin,
     read_kitti_poses,
+    remove_stale_partials,
     write_bin,
     write_ply_scan,
 )
@@ -383,3 +385,69 @@ def test_bin_whose_size_is_not_whole_points_is_refused_on_every_path(tmp_path, c
         err = capsys.readouterr().err
         assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
         assert not out.exists()
+
+
+# ------------------------------------------------------------------ leftovers of killed runs
+def _dead_pid() -> int:
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_sigkilled_simulation_leaves_a_partial_folder_the_next_run_removes(tmp_path, caplog):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    mesh, poses = _mesh_and_poses(tmp_path, frames=400)
+    out = tmp_path / "seq"
+    argv = [sys.executable, "-m", "tools.cli", "simulate", "--mesh", str(mesh), "--poses", str(poses),
+            "--sensor", "vlp16", "--out", str(out)]
+    repo = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(argv, cwd=repo, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    partial = tmp_path / f".seq.partial-{proc.pid}"
+    deadline = time.monotonic() + 60
+    while not list((partial / "velodyne").glob("*.bin")) and time.monotonic() < deadline:
+        assert proc.poll() is None, "the simulation ended before it could be killed"
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert partial.is_dir() and not out.exists()  # what SIGKILL leaves
+    # a live writer's folder (this test's parent process stands in for it) is never touched
+    live = tmp_path / f".seq.partial-{os.getppid()}"
+    (live / "velodyne").mkdir(parents=True)
+    frames = 3
+    (tmp_path / "short.txt").write_text("".join(poses.read_text().splitlines(keepends=True)[:frames]))
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(tmp_path / "short.txt"), "--sensor", "vlp16",
+                 "--out", str(out)]) == 0
+    assert not partial.exists() and live.is_dir() and len(open_sequence(out)) == frames
+    said = [r.getMessage() for r in caplog.records if "removed" in r.getMessage()]
+    assert len(said) == 1 and str(partial) in said[0] and f"process {proc.pid}, which is no longer running" in said[0]
+
+
+def test_stale_folders_left_alone_when_they_may_still_matter(tmp_path):
+    import os
+
+    out = tmp_path / "seq"
+    dead = _dead_pid()
+    foreign = tmp_path / f".seq.partial-{dead}"  # written by a process on another host (shared disk)
+    foreign.mkdir()
+    (foreign / "INCOMPLETE").write_text("a sequence is being written here\nhost: elsewhere.example\npid: 1\n")
+    mine = tmp_path / f".seq.partial-{os.getpid()}"  # this process's own (the writer reuses it)
+    mine.mkdir()
+    old = tmp_path / f".seq.old-{dead}"  # killed between the two renames of a --force swap
+    old.mkdir()
+    other = tmp_path / f".other.partial-{dead}"  # another output's
+    other.mkdir()
+    assert remove_stale_partials(out) == []
+    assert foreign.is_dir() and mine.is_dir() and old.is_dir() and other.is_dir()
+    out.mkdir()  # once the sequence is in place, the old copy is just trash
+    stale = tmp_path / f".seq.partial-{dead}x"  # not a PID: not ours
+    stale.mkdir()
+    assert remove_stale_partials(out) == [old]
+    assert stale.is_dir()
