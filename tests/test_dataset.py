@@ -18,6 +18,7 @@ from simlidar.dataset import (
     read_bin,
     read_kitti_poses,
     remove_stale_partials,
+    sha256_file,
     write_bin,
     write_ply_scan,
 )
@@ -209,7 +210,18 @@ def test_cli_simulate_with_mesh_and_poses(tmp_path):
     seq = open_sequence(out)
     assert len(seq) == 5 and seq.sensor.range_noise_std_m == 0.01
     assert np.allclose(seq.poses[:, 0, 3], np.linspace(0, 6, 5))
-    assert seq.manifest["mesh"] == str(mesh)
+    assert seq.manifest["mesh"] == str(mesh.resolve())
+    assert seq.manifest["mesh_sha256"] == sha256_file(mesh)
+    assert seq.manifest["poses_file"] == str(poses.resolve())
+    assert "extrapolated" not in seq.manifest
+
+
+def test_cli_manifest_paths_are_absolute(tmp_path, monkeypatch):
+    _mesh_and_poses(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    assert salo(["simulate", "--mesh", "room.ply", "--poses", "poses.txt", "--sensor", "vlp16", "--out", "seq"]) == 0
+    m = open_sequence(tmp_path / "seq").manifest
+    assert m["mesh"] == str(tmp_path / "room.ply") and m["poses_file"] == str(tmp_path / "poses.txt")
 
 
 def test_cli_bad_input(tmp_path, capsys):
@@ -221,6 +233,10 @@ def test_cli_bad_input(tmp_path, capsys):
     import trimesh
 
     trimesh.creation.box((4, 4, 4)).export(tmp_path / "block.ply")  # sensor at the origin inside it
+    tunnel = tmp_path / "tunnel.yaml"
+    assert salo(["scenes", "tunnel", "--yaml"]) == 0
+    tunnel.write_text(capsys.readouterr().out)  # holds seed: 0
+    scene = ["--scene", "tunnel", "--set", "length_m=100", "--set", "approach_m=50"]
     cases = [
         (["--mesh", str(tmp_path / "broken.ply"), "--poses", str(poses)], "broken.ply"),
         (["--mesh", str(tmp_path / "missing.ply"), "--poses", str(poses)], "missing.ply: mesh file does not exist"),
@@ -228,11 +244,28 @@ def test_cli_bad_input(tmp_path, capsys):
         (["--mesh", str(tmp_path / "block.ply"), "--poses", str(poses), "--strict-inside-check"],
          "frame 1: sensor at (-1.50, 0.00, 0.00) m is inside geometry: 200 of 200 probe rays hit the back face"),
         (["--mesh", str(mesh), "--poses", str(poses), "--sensor", "nope"], "unknown sensor preset 'nope'"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--frames", "200"],
+         "poses.txt: 5 poses cover 0.4 s; 200 frames need 19.9 s (at most 5 frames fit"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--speed", "3"], "--speed applies to --scene"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--set", "seed=1"], "--set applies to --scene"),
+        ([*scene, "--extrapolate"], "--extrapolate applies to --mesh/--poses"),
+        ([*scene, "--scene-params", str(tunnel), "--seed", "3"],
+         f"--seed 3 and seed: 0 in {tunnel} differ: both set the scene seed, give one"),
+        ([*scene, "--set", "seed=5", "--seed", "3"], "--seed 3 and --set seed=5 differ"),
+        ([*scene, "--set", "seed=abc"], "--set seed=abc: parameter seed: 'abc' is not a valid int"),
+        ([*scene, "--set", "seed=1.5"], "--set seed=1.5: parameter seed: '1.5' is not a valid int"),
+        ([*scene, "--set", "seed=-2"], "--set seed=-2: parameter seed: -2 is below the minimum 0"),
+        ([*scene, "--set", "length_m=long"], "parameter length_m: 'long' is not a valid float"),
+        ([*scene, "--seed", "-1"], "argument --seed: must be at least 0, got -1"),
     ]
     for extra, words in cases:
-        code = salo(["simulate", *extra, "--out", str(out)])
+        try:
+            code = salo(["simulate", *extra, "--out", str(out)])
+        except SystemExit as exc:  # argparse refuses some before any work
+            code = exc.code
         err = capsys.readouterr().err
         assert code == 2 and words in err, (extra, err)
+        assert len(err.strip().splitlines()) == 1 or err.startswith("usage:"), err  # one line, no traceback
         assert not out.exists()
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
     assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--out", str(out)]) == 0
@@ -347,6 +380,62 @@ def test_cli_simulates_a_closed_room_of_either_winding(tmp_path, capsys, caplog,
     res = np.concatenate(residuals)
     assert abs(res.mean()) < 5 * sigma / np.sqrt(len(res))
     assert abs(res.std() / sigma - 1) < 0.05
+
+
+# ------------------------------------------------------------------ poses, frames and extrapolation
+def test_cli_frames_beyond_the_poses_need_extrapolate(tmp_path, capsys):
+    mesh, poses = _mesh_and_poses(tmp_path)  # 5 poses, 1.5 m apart, 0.1 s apart
+    out = tmp_path / "seq"
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16", "--frames", "8",
+                 "--out", str(out)]) == 2
+    assert "5 poses cover 0.4 s; 8 frames need 0.7 s" in capsys.readouterr().err and not out.exists()
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16", "--frames", "8",
+                 "--extrapolate", "--out", str(out)]) == 0
+    assert "extrapolating 0.3 s beyond the last pose" in capsys.readouterr().err
+    seq = open_sequence(out)
+    assert len(seq) == 8 and np.allclose(seq.poses[:, 0, 3], 1.5 * np.arange(8))  # the last velocity, continued
+    ex = seq.manifest["extrapolated"]
+    assert ex["poses_cover_s"] == pytest.approx(0.4) and ex["frames_need_s"] == pytest.approx(0.7)
+    assert ex["beyond_last_pose_s"] == pytest.approx(0.3)
+    # exactly as many frames as poses is no extrapolation
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16", "--frames", "5",
+                 "--out", str(tmp_path / "five")]) == 0
+    assert "extrapolated" not in open_sequence(tmp_path / "five").manifest
+
+
+def test_cli_pose_times_that_do_not_start_at_zero(tmp_path, capsys):
+    # the first sweep starts at the first pose, wherever its clock starts
+    mesh, poses = _mesh_and_poses(tmp_path)  # 5 poses, 1.5 m apart
+    times = tmp_path / "times.txt"
+    times.write_text("".join(f"{100 + 0.2 * k:.3f}\n" for k in range(5)))
+    base = ["simulate", "--mesh", str(mesh), "--poses", str(poses), "--times", str(times), "--sensor", "vlp16"]
+    assert salo([*base, "--frames", "10", "--out", str(tmp_path / "ten")]) == 2
+    assert "5 poses cover 0.8 s; 10 frames need 0.9 s (at most 9 frames fit" in capsys.readouterr().err
+    assert salo([*base, "--frames", "9", "--out", str(tmp_path / "seq")]) == 0
+    seq = open_sequence(tmp_path / "seq")
+    assert np.allclose(np.reshape(seq.manifest["T_world_first_lidar"], (3, 4))[:, 3], [-3.0, 0.0, 0.0])
+    assert np.allclose(seq.poses[:, 0, 3], 0.75 * np.arange(9))
+    assert seq.manifest["times_file"] == str(times.resolve())
+
+
+# ------------------------------------------------------------------ scene seeds
+def test_cli_scene_seed_from_a_parameter_file_or_set(tmp_path, capsys):
+    assert salo(["scenes", "tunnel", "--yaml"]) == 0
+    params = tmp_path / "tunnel.yaml"
+    params.write_text(capsys.readouterr().out.replace("seed: 0", "seed: 4"))
+    small = ["--scene", "tunnel", "--set", "length_m=100", "--set", "approach_m=50", "--sensor", "vlp16",
+             "--frames", "1"]
+    runs = {
+        "file": (["--scene-params", str(params)], 4),
+        "set": (["--set", "seed=5"], 5),
+        "file+set": (["--scene-params", str(params), "--set", "seed=6"], 6),  # --set wins over the file
+        "agree": (["--scene-params", str(params), "--seed", "4"], 4),
+        "default": ([], 0),
+    }
+    for name, (extra, seed) in runs.items():
+        assert salo(["simulate", *small, *extra, "--out", str(tmp_path / name)]) == 0, name
+        m = open_sequence(tmp_path / name).manifest
+        assert m["scene_seed"] == seed and m["seed"] == seed and m["scene_params"]["seed"] == seed, name
 
 
 # ------------------------------------------------------------------ .bin files

@@ -58,18 +58,33 @@ def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> d
     return out
 
 
-def _split_seed(overrides: dict[str, Any], seed: int | None) -> tuple[int, dict[str, Any]]:
-    """The seed (command line first, then the overrides, else 0) and the other overrides."""
+def split_seed(overrides: dict[str, Any], cli_seed: int | None, pairs: list[str] | None = None,
+               yaml_file: Path | None = None) -> tuple[int, dict[str, Any]]:
+    """The scene seed and the other overrides.
+
+    A ``seed`` among the overrides (a parameter file's ``seed:``, as ``salo scenes
+    NAME --yaml`` writes it, or ``--set seed=N``) and ``--seed`` (``cli_seed``) are
+    one setting: either gives it (default 0); if both are given they must agree.
+    ``pairs`` and ``yaml_file`` (what ``parse_overrides`` read) only name the
+    seed's origin in messages. Raises ValueError naming the origin of a bad value
+    (not a whole number >= 0) or both seeds when they differ.
+    """
+    from scenes.params import CommonParams, resolve
+
     rest = dict(overrides)
-    from_file = rest.pop("seed", None)
-    if seed is not None:
-        return int(seed), rest
-    if from_file is None:
-        return 0, rest
+    if "seed" not in rest:
+        return (0 if cli_seed is None else int(cli_seed)), rest
+    value = rest.pop("seed")
+    set_pairs = [p.strip() for p in pairs or [] if p.partition("=")[0].strip() == "seed"]
+    origin = f"--set {set_pairs[-1]}" if set_pairs else f"{yaml_file}" if yaml_file is not None else "seed"
     try:
-        return int(from_file), rest
-    except (TypeError, ValueError):
-        raise ValueError(f"parameter seed: {from_file!r} is not a valid int") from None
+        seed = resolve(CommonParams, {"seed": value}).seed
+    except ValueError as exc:
+        raise ValueError(f"{origin}: {exc}") from None
+    if cli_seed is not None and int(cli_seed) != seed:
+        where = origin if set_pairs else f"seed: {seed} in {origin}"
+        raise ValueError(f"--seed {cli_seed} and {where} differ: both set the scene seed, give one")
+    return seed, rest
 
 
 def _jsonable(value: Any) -> Any:
@@ -103,6 +118,9 @@ def build_world_and_trajectory(name: str, seed: int, overrides: dict[str, Any]):
     """
     from simlidar.world import World
 
+    if "seed" in overrides:
+        raise ValueError(f"parameter seed: give the seed as the seed argument ({seed}), not among the overrides "
+                         f"(seed={overrides['seed']!r})")
     scene = build_scene_checked(name, seed, overrides)
     world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, f"scene:{name}")
     info = {
@@ -118,7 +136,8 @@ def build_world_and_trajectory(name: str, seed: int, overrides: dict[str, Any]):
 
 # ---------------------------------------------------------------- parsers
 def _add_param_args(p) -> None:
-    p.add_argument("--seed", type=int, help="scene seed (default 0, or the parameter file's)")
+    p.add_argument("--seed", type=int, help="scene seed (default 0, or the parameter file's or --set seed=N; "
+                   "both given must agree)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter (repeatable); see `salo scenes NAME`")
     p.add_argument("--params", type=Path, help="YAML file of scene parameters (KEY: VALUE)")
@@ -195,7 +214,7 @@ def cmd_scenes(args) -> int:
 def _scene_from_args(name: str, args):
     try:
         overrides = parse_overrides(args.overrides, args.params)
-        seed, rest = _split_seed(overrides, args.seed)
+        seed, rest = split_seed(overrides, args.seed, args.overrides, args.params)
         return build_scene_checked(name, seed, rest)
     except ValueError as exc:
         raise _command_error(str(exc)) from None
@@ -334,4 +353,4 @@ def _sequence_view(folder: Path) -> dict:
             "xyz": frame.points @ T[:3, :3].T + T[:3, 3], "ring": ring, "title": title}
 
 
-__all__ = ["add_commands", "build_world_and_trajectory", "export_scene", "parse_overrides"]
+__all__ = ["add_commands", "build_world_and_trajectory", "export_scene", "parse_overrides", "split_seed"]
