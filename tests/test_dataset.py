@@ -411,8 +411,9 @@ def test_cli_pose_times_that_do_not_start_at_zero(tmp_path, capsys):
     base = ["simulate", "--mesh", str(mesh), "--poses", str(poses), "--times", str(times), "--sensor", "vlp16"]
     assert salo([*base, "--frames", "10", "--out", str(tmp_path / "ten")]) == 2
     assert "5 poses cover 0.8 s; 10 frames need 0.9 s (at most 9 frames fit" in capsys.readouterr().err
-    assert salo([*base, "--frames", "9", "--out", str(tmp_path / "seq")]) == 0
+    assert salo([*base, "--out", str(tmp_path / "seq")]) == 0  # by default, as many frames as the poses cover
     seq = open_sequence(tmp_path / "seq")
+    assert len(seq) == 9
     assert np.allclose(np.reshape(seq.manifest["T_world_first_lidar"], (3, 4))[:, 3], [-3.0, 0.0, 0.0])
     assert np.allclose(seq.poses[:, 0, 3], 0.75 * np.arange(9))
     assert seq.manifest["times_file"] == str(times.resolve())

@@ -69,7 +69,8 @@ def _add_simulate(sub) -> None:
     )
     p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
     p.add_argument("--frames", type=whole_number(1),
-                   help="number of sweeps (default: one per pose, or 100 along a scene)")
+                   help="number of sweeps (default: as many as the poses cover, one per pose without --times; "
+                   "100 along a scene)")
     p.add_argument("--seed", type=whole_number(0),
                    help="seed of the noise, and of a --scene (default 0, or the scene parameters' seed)")
     p.add_argument("--noise-std", type=real_number(0.0),
@@ -128,7 +129,8 @@ def _simulate_mesh(args, sensor) -> int:
         trajectory = SampledTrajectory(times, poses)
     except ValueError as exc:
         raise DatasetError(f"{args.times or args.poses}: {exc}") from None
-    frames = args.frames if args.frames is not None else len(poses)
+    fit = _sweeps_covered(times, sensor)
+    frames = args.frames if args.frames is not None else fit
     info = {
         "command": "simulate",
         "mesh": str(args.mesh.resolve()),
@@ -139,7 +141,6 @@ def _simulate_mesh(args, sensor) -> int:
         info["times_file"] = str(args.times.resolve())
     beyond = _beyond_last_pose(times, sensor, frames)
     if beyond > 0:
-        fit = int(np.floor((times[-1] - times[0]) / sensor.sweep_period_s + 1e-9)) + 1
         need = times[0] + (frames - 1) * sensor.sweep_period_s
         numbers = (f"{len(poses)} poses cover {times[-1] - times[0]:.1f} s; "
                    f"{frames} frames need {need - times[0]:.1f} s")
@@ -154,6 +155,11 @@ def _simulate_mesh(args, sensor) -> int:
     return _run_simulation(world, trajectory, sensor, args, frames, info, where=str(args.poses),
                            t_start=float(times[0]), seed=0 if args.seed is None else args.seed,
                            strict_inside=True if args.strict_inside_check else None)
+
+
+def _sweeps_covered(times, sensor) -> int:
+    """How many sweeps, one period apart from ``times[0]``, start within the pose times (N,) s."""
+    return int((times[-1] - times[0]) / sensor.sweep_period_s + 1e-9) + 1
 
 
 def _beyond_last_pose(times, sensor, frames: int) -> float:
