@@ -25,10 +25,13 @@ a plain folder of ``.bin`` / ``.ply`` scans with a sensor file.
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import json
+import logging
 import os
 import shutil
+import socket
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +41,8 @@ import numpy as np
 from . import __version__, se3
 from .degeneracy import CSV_HEADER, csv_row, degeneracy
 from .sensor import LidarModel, SensorError, load_sensor, load_sensor_file
+
+log = logging.getLogger(__name__)
 
 FORMAT_NAME = "salo-sequence"
 FORMAT_VERSION = 1
@@ -140,18 +145,33 @@ def camera_poses_to_lidar(poses_cam: np.ndarray, Tr_cam_velo: np.ndarray) -> np.
     return np.linalg.inv(L[0]) @ L
 
 
+BIN_POINT_BYTES = 16  # float32 x y z intensity
+
+
+def check_bin_size(path: Path, size: int) -> None:
+    """Refuse a ``.bin`` of ``size`` bytes that is not a whole number of 16-byte points."""
+    if size % BIN_POINT_BYTES:
+        raise DatasetError(
+            f"{path}: size {size:,} bytes is not a whole number of {BIN_POINT_BYTES}-byte points "
+            f"(float32 x y z intensity): {size // BIN_POINT_BYTES:,} points and {size % BIN_POINT_BYTES} "
+            "bytes over (truncated or not a KITTI scan?)"
+        )
+
+
 def read_bin(path: str | Path) -> np.ndarray:
-    """A KITTI ``.bin`` scan -> (N, 4) float32 x y z intensity."""
+    """A KITTI ``.bin`` scan -> (N, 4) float32 x y z intensity.
+
+    The file's size must be a multiple of 16 bytes (``np.fromfile`` alone would
+    silently drop a partial float at the end).
+    """
     path = Path(path)
     try:
-        raw = np.fromfile(path, dtype="<f4")
+        with open(path, "rb") as fh:
+            check_bin_size(path, os.fstat(fh.fileno()).st_size)
+            raw = np.fromfile(fh, dtype="<f4")
     except OSError as exc:
         raise DatasetError(f"{path}: cannot read scan ({exc.strerror})") from None
-    if raw.size % 4:
-        raise DatasetError(
-            f"{path}: size {raw.size * 4} bytes is not a whole number of 16-byte points "
-            "(float32 x y z intensity)"
-        )
+    check_bin_size(path, raw.size * 4)  # the file changed under us
     return raw.reshape(-1, 4)
 
 
@@ -250,6 +270,72 @@ def sha256_file(path: Path) -> str:
 
 
 # ---------------------------------------------------------------- writer
+def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists on this machine (a process we may not signal counts as alive)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def remove_stale_partials(out_dir: str | Path) -> list[Path]:
+    """Remove the hidden work folders a killed writer of ``out_dir`` left; returns them.
+
+    A writer builds ``.NAME.partial-PID`` beside ``out_dir`` (and, replacing an
+    old sequence, moves that to ``.NAME.old-PID`` for a moment). A process
+    killed with SIGKILL cannot clean up, so the next writer of the same
+    ``out_dir`` removes those whose process no longer runs, logging a warning
+    for each. Left alone: a folder of a live process (another writer at work),
+    of this process, with no PID in its name, whose ``INCOMPLETE`` marker names
+    another host (a shared file system: its PID means nothing here), or an
+    ``old`` one while ``out_dir`` is missing (the swap was cut between its two
+    renames: that folder is the only copy of the previous sequence).
+    """
+    out_dir = Path(out_dir)
+    removed: list[Path] = []
+    if not out_dir.parent.is_dir():
+        return removed
+    host = socket.gethostname()
+    for kind in ("partial", "old"):
+        for folder in sorted(out_dir.parent.glob(f".{glob.escape(out_dir.name)}.{kind}-*")):
+            pid_text = folder.name.rsplit("-", 1)[1]
+            if not folder.is_dir() or not pid_text.isdigit():
+                continue
+            pid = int(pid_text)
+            if pid == os.getpid() or _pid_alive(pid) or _marker_host(folder) not in (None, host):
+                continue
+            if kind == "old" and not out_dir.exists():  # killed mid-swap: the only copy of the old sequence
+                log.warning("%s holds the sequence that process %d was replacing when it stopped; %s is "
+                            "missing, so it is left for you to rename back", folder, pid, out_dir)
+                continue
+            shutil.rmtree(folder, ignore_errors=True)
+            if not folder.exists():
+                removed.append(folder)
+                log.warning("removed %s, left by process %d, which is no longer running (an interrupted "
+                            "write of %s)", folder, pid, out_dir.name)
+    return removed
+
+
+def _marker_host(folder: Path) -> str | None:
+    """The host named in a work folder's ``INCOMPLETE`` marker, or None (no marker, or none named)."""
+    try:
+        text = (folder / INCOMPLETE_MARKER).read_text(errors="replace")
+    except OSError:
+        return None
+    for line in text.splitlines():
+        key, sep, value = line.partition(":")
+        if sep and key.strip() == "host":
+            return value.strip()
+    return None
+
+
 class SequenceWriter:
     """Streams frames of a simulated sequence to disk and commits it atomically.
 
@@ -275,11 +361,13 @@ class SequenceWriter:
 
     def __enter__(self) -> SequenceWriter:
         self.out_dir.parent.mkdir(parents=True, exist_ok=True)
+        self.removed_stale = remove_stale_partials(self.out_dir)
         if self.tmp.exists():
             shutil.rmtree(self.tmp)
         (self.tmp / "velodyne").mkdir(parents=True)
         (self.tmp / "sidecar").mkdir()
-        (self.tmp / INCOMPLETE_MARKER).write_text("a sequence is being written here\n")
+        (self.tmp / INCOMPLETE_MARKER).write_text(
+            f"a sequence is being written here\nhost: {socket.gethostname()}\npid: {os.getpid()}\n")
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -494,6 +582,13 @@ def _scan_list(folder: Path, exts: tuple[str, ...]) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.suffix in exts and not p.name.startswith("."))
 
 
+def _check_bin_sizes(scans: list[Path]) -> None:
+    """Refuse, when a sequence is opened, a ``.bin`` that is not whole 16-byte points (one stat each)."""
+    for f in scans:
+        if f.suffix == ".bin":
+            check_bin_size(f, f.stat().st_size)
+
+
 def _open_salo(path: Path, sensor: LidarModel | None) -> Sequence:
     try:
         manifest = json.loads((path / "manifest.json").read_text())
@@ -507,6 +602,7 @@ def _open_salo(path: Path, sensor: LidarModel | None) -> Sequence:
     missing = [p for p in scans + cars if not p.is_file()]
     if missing:
         raise DatasetError(f"{missing[0]}: missing, the manifest lists {n} frames")
+    _check_bin_sizes(scans)
     poses = read_kitti_poses(path / "poses.txt")
     times = read_times(path / "times.txt")
     if len(poses) != n or len(times) != n:
@@ -522,6 +618,7 @@ def _open_kitti(path: Path, sensor: LidarModel | None, poses_file) -> Sequence:
     scans = _scan_list(path / "velodyne", (".bin",))
     if not scans:
         raise DatasetError(f"{path / 'velodyne'}: no .bin scans")
+    _check_bin_sizes(scans)
     times = read_times(path / "times.txt") if (path / "times.txt").is_file() else None
     poses = None
     if poses_file is None:
@@ -543,6 +640,7 @@ def _open_scans(path: Path, sensor: LidarModel | None, poses_file) -> Sequence:
     scans = _scan_list(folder, (".bin", ".ply"))
     if not scans:
         raise DatasetError(f"{path}: no .bin or .ply scans (and no manifest.json or calib.txt)")
+    _check_bin_sizes(scans)
     if sensor is None:
         for name in ("sensor.yaml", "sensor.yml"):
             if (path / name).is_file():

@@ -30,6 +30,7 @@ import numpy as np
 from . import se3
 from .dataset import Frame
 from .degeneracy import Degeneracy, degeneracy
+from .inside import check_poses
 from .sensor import LidarModel
 from .simulate import frame_start_times
 from .sweep import SweepSimulator
@@ -98,8 +99,7 @@ def simulate_in_memory(
     sim = SweepSimulator(world, sensor, seed=seed, motion_distortion=fields == "simulated")
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
-    for k, pose in enumerate(poses):
-        sim.check_clear(pose, where=f"frame {k}: ")
+    check_poses(sim.raycaster, poses, strict=world.normals_reliable, source=world.source)
     points, extra, degen = [], [], []
     for k in range(frames):
         scan = sim.sweep(trajectory, float(t0[k]), frame_index=k)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .dataset import SequenceWriter
+from .inside import check_poses
 from .sensor import LidarModel
 from .sweep import Scan, SweepSimulator
 from .trajectory import Trajectory
@@ -35,13 +36,18 @@ def simulate_sequence(
     force: bool = False,
     on_frame: Callable[[int, Scan], None] | None = None,
     simulator: SweepSimulator | None = None,
+    strict_inside: bool | None = None,
 ) -> Path:
     """Simulate ``frames`` consecutive sweeps and write them as a sequence folder.
 
-    Every frame's reference pose is first checked to be outside geometry, so a
-    bad path fails before anything is written. ``info`` goes into the manifest
-    (scene, mesh, parameters). ``on_frame(k, scan)`` is called after each frame
-    (progress bars). Returns the finished folder.
+    Every frame's reference pose is first probed for being inside geometry
+    (``simlidar.inside``): with ``strict_inside`` (default: when the world's
+    normals are reliable, as a procedural scene's are) an enclosed pose raises
+    ``SensorInsideGeometry`` before anything is written; otherwise one warning
+    is logged with the evidence, the simulation goes on, and the manifest's
+    ``inside_check`` records it. ``info`` goes into the manifest (scene, mesh,
+    parameters). ``on_frame(k, scan)`` is called after each frame (progress
+    bars). Returns the finished folder.
     """
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
@@ -49,8 +55,8 @@ def simulate_sequence(
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
     writer = SequenceWriter(out_dir, sensor, {}, force=force)  # refuses an existing folder now
-    for k, pose in enumerate(poses):
-        sim.check_clear(pose, where=f"frame {k}: ")
+    strict = world.normals_reliable if strict_inside is None else bool(strict_inside)
+    inside_record = check_poses(sim.raycaster, poses, strict, source=world.source)
     manifest_info = {
         "seed": int(seed),
         "motion_distortion": bool(motion_distortion),
@@ -58,6 +64,7 @@ def simulate_sequence(
         "world_source": world.source,
         "world_faces": int(len(world.faces)),
         "object_labels": list(world.object_labels),
+        "inside_check": inside_record,
         **(info or {}),
     }
     writer.info = manifest_info

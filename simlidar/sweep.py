@@ -29,10 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .inside import InsideProbe, SensorInsideGeometry, probe
 from .raycast import Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
 from .world import World
+
+__all__ = ["SIDECAR_DTYPE", "Scan", "SensorInsideGeometry", "SweepSimulator"]
 
 # Column blocks a sweep is cut into (fixed, so results do not depend on the core count).
 N_BLOCKS = 8
@@ -95,10 +98,6 @@ class Scan:
         return rec
 
 
-class SensorInsideGeometry(ValueError):
-    """The sensor origin lies inside a solid of the world."""
-
-
 class SweepSimulator:
     """Simulates sweeps of ``sensor`` in ``world``.
 
@@ -145,26 +144,20 @@ class SweepSimulator:
         ce = np.cos(elevation)
         return np.stack([ce * np.cos(azimuth), ce * np.sin(azimuth), np.sin(elevation)], axis=1)
 
-    def check_clear(self, pose: np.ndarray, where: str = "") -> None:
-        """Raise ``SensorInsideGeometry`` if the sensor at ``pose`` (4, 4) is inside a solid.
+    def check_clear(self, pose: np.ndarray, where: str = "", strict: bool | None = None) -> InsideProbe:
+        """Probe whether the sensor at ``pose`` (4, 4) is inside a solid (``simlidar.inside``).
 
-        Probe rays in all directions; if most of the surfaces they reach are seen
-        from their back (inside) side, the origin is enclosed by a solid: inside a
-        building, or under the ground.
+        If most probe rays hit back faces, raise ``SensorInsideGeometry`` when
+        ``strict`` (default: when the world's normals are reliable, as a
+        procedural scene's are); otherwise return the evidence for the caller to
+        report. ``where`` prefixes the message (e.g. "frame 3: ").
         """
-        golden = np.pi * (3.0 - np.sqrt(5.0))
-        k = np.arange(200) + 0.5
-        z = 1 - 2 * k / 200
-        r = np.sqrt(1 - z**2)
-        dirs = np.stack([r * np.cos(golden * k), r * np.sin(golden * k), z], axis=1)
-        hits = self.raycaster.cast(pose[:3, 3], dirs, 1e6)
-        n_hit = int(hits.hit.sum())
-        if n_hit and hits.back_face[hits.hit].mean() > 0.5:
-            p = pose[:3, 3]
-            raise SensorInsideGeometry(
-                f"{where}sensor at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m is inside geometry: "
-                f"{int(hits.back_face.sum())} of {n_hit} probe rays hit the inside of a surface"
-            )
+        found = probe(self.raycaster, pose)
+        if strict is None:
+            strict = self.world.normals_reliable
+        if strict and found.enclosed:
+            raise SensorInsideGeometry(f"{where}{found.where()} is inside geometry: {found.evidence()}")
+        return found
 
     def sweep(self, trajectory: Trajectory, t0: float, frame_index: int = 0) -> Scan:
         """Simulate the sweep that starts at time ``t0`` (s) along ``trajectory``.

@@ -46,6 +46,11 @@ class World:
 
     object_labels: one class label per object id (see ``LABEL_REFLECTANCE``).
     source: where the mesh came from (file path or scene name), for manifests.
+    normals_reliable: every triangle's winding faces out of the solid it bounds, so
+        a sensor that sees mostly back faces is inside a solid (``simlidar.inside``).
+        True for worlds built in code (the procedural scenes); ``load_world`` sets
+        False: a user's mesh may be a room with outward normals, or have flipped
+        or inconsistent ones.
     """
 
     vertices: np.ndarray
@@ -53,6 +58,7 @@ class World:
     face_object_id: np.ndarray
     object_labels: list[str] = field(default_factory=list)
     source: str = ""
+    normals_reliable: bool = True
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, dtype=np.float64)
@@ -80,7 +86,10 @@ class World:
 
 
 def load_world(path: str | Path) -> World:
-    """Read a mesh file (PLY/OBJ/GLB/GLTF/STL/OFF) into a ``World``; errors name the file."""
+    """Read a mesh file (PLY/OBJ/GLB/GLTF/STL/OFF) into a ``World``; errors name the file.
+
+    Its winding is not trusted (``World.normals_reliable`` False).
+    """
     import trimesh
 
     path = Path(path)
@@ -124,6 +133,7 @@ def load_world(path: str | Path) -> World:
         raise WorldError(f"{path}: not a triangle mesh (got {type(loaded).__name__})")
     if not np.all(np.isfinite(world.vertices)):
         raise WorldError(f"{path}: mesh has non-finite vertex coordinates")
+    world.normals_reliable = False  # a user's mesh: rooms with outward normals, scans with flipped ones
     return world
 
 

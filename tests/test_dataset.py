@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +15,11 @@ from simlidar.dataset import (
     camera_poses_to_lidar,
     format_kitti_poses,
     open_sequence,
+    read_bin,
     read_kitti_poses,
+    remove_stale_partials,
+    sha256_file,
+    write_bin,
     write_ply_scan,
 )
 from simlidar.sensor import load_preset
@@ -108,12 +113,15 @@ def test_unfinished_or_damaged_folders_are_refused(tmp_path):
     with pytest.raises(DatasetError, match="000002.npy: missing"):
         open_sequence(out)
     simulate(tmp_path / "s2")
-    with open(tmp_path / "s2/velodyne/000001.bin", "ab") as fh:
-        fh.write(b"\0" * 5)
-    with pytest.raises(DatasetError, match="000001.bin.*not a whole number"):
-        open_sequence(tmp_path / "s2")[1]
+    with open(tmp_path / "s2/velodyne/000001.bin", "r+b") as fh:  # same size, other content
+        fh.seek(100)
+        fh.write(b"\xff" * 4)
     with pytest.raises(DatasetError, match="checksum"):
         open_sequence(tmp_path / "s2").verify()
+    with open(tmp_path / "s2/velodyne/000001.bin", "ab") as fh:
+        fh.write(b"\0" * 5)
+    with pytest.raises(DatasetError, match="000001.bin: size .* not a whole number"):
+        open_sequence(tmp_path / "s2")
 
 
 def test_kitti_camera_to_lidar_hand_made():
@@ -202,7 +210,18 @@ def test_cli_simulate_with_mesh_and_poses(tmp_path):
     seq = open_sequence(out)
     assert len(seq) == 5 and seq.sensor.range_noise_std_m == 0.01
     assert np.allclose(seq.poses[:, 0, 3], np.linspace(0, 6, 5))
-    assert seq.manifest["mesh"] == str(mesh)
+    assert seq.manifest["mesh"] == str(mesh.resolve())
+    assert seq.manifest["mesh_sha256"] == sha256_file(mesh)
+    assert seq.manifest["poses_file"] == str(poses.resolve())
+    assert "extrapolated" not in seq.manifest
+
+
+def test_cli_manifest_paths_are_absolute(tmp_path, monkeypatch):
+    _mesh_and_poses(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    assert salo(["simulate", "--mesh", "room.ply", "--poses", "poses.txt", "--sensor", "vlp16", "--out", "seq"]) == 0
+    m = open_sequence(tmp_path / "seq").manifest
+    assert m["mesh"] == str(tmp_path / "room.ply") and m["poses_file"] == str(tmp_path / "poses.txt")
 
 
 def test_cli_bad_input(tmp_path, capsys):
@@ -214,17 +233,39 @@ def test_cli_bad_input(tmp_path, capsys):
     import trimesh
 
     trimesh.creation.box((4, 4, 4)).export(tmp_path / "block.ply")  # sensor at the origin inside it
+    tunnel = tmp_path / "tunnel.yaml"
+    assert salo(["scenes", "tunnel", "--yaml"]) == 0
+    tunnel.write_text(capsys.readouterr().out)  # holds seed: 0
+    scene = ["--scene", "tunnel", "--set", "length_m=100", "--set", "approach_m=50"]
     cases = [
         (["--mesh", str(tmp_path / "broken.ply"), "--poses", str(poses)], "broken.ply"),
         (["--mesh", str(tmp_path / "missing.ply"), "--poses", str(poses)], "missing.ply: mesh file does not exist"),
         (["--mesh", str(mesh), "--poses", str(bad_poses)], "bad.txt:1"),
-        (["--mesh", str(tmp_path / "block.ply"), "--poses", str(poses)], "inside geometry"),
+        (["--mesh", str(tmp_path / "block.ply"), "--poses", str(poses), "--strict-inside-check"],
+         "frame 1: sensor at (-1.50, 0.00, 0.00) m is inside geometry: 200 of 200 probe rays hit the back face"),
         (["--mesh", str(mesh), "--poses", str(poses), "--sensor", "nope"], "unknown sensor preset 'nope'"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--frames", "200"],
+         "poses.txt: 5 poses cover 0.4 s; 200 frames need 19.9 s (at most 5 frames fit"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--speed", "3"], "--speed applies to --scene"),
+        (["--mesh", str(mesh), "--poses", str(poses), "--set", "seed=1"], "--set applies to --scene"),
+        ([*scene, "--extrapolate"], "--extrapolate applies to --mesh/--poses"),
+        ([*scene, "--scene-params", str(tunnel), "--seed", "3"],
+         f"--seed 3 and seed: 0 in {tunnel} differ: both set the scene seed, give one"),
+        ([*scene, "--set", "seed=5", "--seed", "3"], "--seed 3 and --set seed=5 differ"),
+        ([*scene, "--set", "seed=abc"], "--set seed=abc: parameter seed: 'abc' is not a valid int"),
+        ([*scene, "--set", "seed=1.5"], "--set seed=1.5: parameter seed: '1.5' is not a valid int"),
+        ([*scene, "--set", "seed=-2"], "--set seed=-2: parameter seed: -2 is below the minimum 0"),
+        ([*scene, "--set", "length_m=long"], "parameter length_m: 'long' is not a valid float"),
+        ([*scene, "--seed", "-1"], "argument --seed: must be at least 0, got -1"),
     ]
     for extra, words in cases:
-        code = salo(["simulate", *extra, "--out", str(out)])
+        try:
+            code = salo(["simulate", *extra, "--out", str(out)])
+        except SystemExit as exc:  # argparse refuses some before any work
+            code = exc.code
         err = capsys.readouterr().err
         assert code == 2 and words in err, (extra, err)
+        assert len(err.strip().splitlines()) == 1 or err.startswith("usage:"), err  # one line, no traceback
         assert not out.exists()
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
     assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--out", str(out)]) == 0
@@ -278,3 +319,225 @@ def test_check_clear_uses_each_frame(tmp_path):
         simulate_sequence(world, traj, load_preset("vlp16"), tmp_path / "s", frames=5)
     assert list(tmp_path.iterdir()) == []
     assert SweepSimulator  # imported for the error type's module
+
+
+# ------------------------------------------------------------------ enclosed worlds from a user's mesh
+@pytest.mark.parametrize("winding", ["outward", "inward"])
+def test_cli_simulates_a_closed_room_of_either_winding(tmp_path, capsys, caplog, winding):
+    # A 10 x 8 x 3 m room, floor at z = 0, the lidar at 1.8 m moving along x: modelled as a solid box
+    # (trimesh's outward normals, every wall seen from behind) or with its faces turned inwards.
+    import trimesh
+
+    m = trimesh.creation.box((10.0, 8.0, 3.0))
+    m.apply_translation((0.0, 0.0, 1.5))
+    if winding == "inward":
+        m.invert()
+    m.export(tmp_path / "room.ply")
+    T = np.tile(np.eye(4), (4, 1, 1))
+    T[:, 0, 3] = np.linspace(-2.0, 2.0, 4)
+    T[:, 1, 3] = 0.7
+    T[:, 2, 3] = 1.8
+    (tmp_path / "poses.txt").write_text(format_kitti_poses(T))
+    lo, hi = np.array([-5.0, -4.0, 0.0]), np.array([5.0, 4.0, 3.0])
+    sigma = 0.02
+    out = tmp_path / "seq"
+    assert salo(["simulate", "--mesh", str(tmp_path / "room.ply"), "--poses", str(tmp_path / "poses.txt"),
+                 "--sensor", "vlp16", "--noise-std", str(sigma), "--no-motion-distortion", "--seed", "2",
+                 "--out", str(out)]) == 0
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    seq = open_sequence(out)
+    check = seq.manifest["inside_check"]
+    assert check["mode"] == "warn"
+    if winding == "outward":
+        assert check["enclosed_frames"] == 4 and check["probe_rays_back_face"] == 200
+        assert len(warned) == 1 and "sees mostly back faces at 4 of 4 frames" in warned[0]
+        assert "sensor at (-2.00, 0.70, 1.80) m, 200 of 200 probe rays hit the back face" in warned[0]
+    else:
+        assert check["enclosed_frames"] == 0 and warned == []
+    T_first = np.eye(4)
+    T_first[:3, :4] = np.reshape(seq.manifest["T_world_first_lidar"], (3, 4))
+    residuals = []
+    for k, frame in enumerate(seq):
+        assert len(frame.points) == seq.sensor.rays_per_sweep  # closed room: every beam returns
+        T_k = T_first @ seq.poses[k]
+        assert np.allclose(T_k, T[k], atol=1e-9)
+        d = frame.points / np.linalg.norm(frame.points, axis=1, keepdims=True)  # beams, sensor frame
+        d_world = d @ T_k[:3, :3].T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_axis = np.where(d_world > 0, (hi - T_k[:3, 3]) / d_world,
+                              np.where(d_world < 0, (lo - T_k[:3, 3]) / d_world, np.inf))
+        wall = t_axis.min(axis=1)  # distance to the wall along each beam
+        axis = t_axis.argmin(axis=1)
+        assert np.abs(frame.field("true_range_m") - wall).max() < 1e-4  # float32 on disk
+        residuals.append(frame.field("range_m") - wall)
+        # the normal is the wall's, turned to face the sensor
+        n = frame.field("normal")
+        n_true = np.zeros_like(n)
+        rows = np.arange(len(n))
+        n_true[rows, axis] = -np.sign(d[rows] @ T_k[:3, :3].T)[rows, axis]
+        assert np.abs(n @ T_k[:3, :3].T - n_true).max() < 1e-5
+        assert np.all(np.einsum("ij,ij->i", n, frame.field("true_xyz")) < 0)
+    res = np.concatenate(residuals)
+    assert abs(res.mean()) < 5 * sigma / np.sqrt(len(res))
+    assert abs(res.std() / sigma - 1) < 0.05
+
+
+# ------------------------------------------------------------------ poses, frames and extrapolation
+def test_cli_frames_beyond_the_poses_need_extrapolate(tmp_path, capsys):
+    mesh, poses = _mesh_and_poses(tmp_path)  # 5 poses, 1.5 m apart, 0.1 s apart
+    out = tmp_path / "seq"
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16", "--frames", "8",
+                 "--out", str(out)]) == 2
+    assert "5 poses cover 0.4 s; 8 frames need 0.7 s" in capsys.readouterr().err and not out.exists()
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16", "--frames", "8",
+                 "--extrapolate", "--out", str(out)]) == 0
+    assert "extrapolating 0.3 s beyond the last pose" in capsys.readouterr().err
+    seq = open_sequence(out)
+    assert len(seq) == 8 and np.allclose(seq.poses[:, 0, 3], 1.5 * np.arange(8))  # the last velocity, continued
+    ex = seq.manifest["extrapolated"]
+    assert ex["poses_cover_s"] == pytest.approx(0.4) and ex["frames_need_s"] == pytest.approx(0.7)
+    assert ex["beyond_last_pose_s"] == pytest.approx(0.3)
+    # exactly as many frames as poses is no extrapolation
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(poses), "--sensor", "vlp16", "--frames", "5",
+                 "--out", str(tmp_path / "five")]) == 0
+    assert "extrapolated" not in open_sequence(tmp_path / "five").manifest
+
+
+def test_cli_pose_times_that_do_not_start_at_zero(tmp_path, capsys):
+    # the first sweep starts at the first pose, wherever its clock starts
+    mesh, poses = _mesh_and_poses(tmp_path)  # 5 poses, 1.5 m apart
+    times = tmp_path / "times.txt"
+    times.write_text("".join(f"{100 + 0.2 * k:.3f}\n" for k in range(5)))
+    base = ["simulate", "--mesh", str(mesh), "--poses", str(poses), "--times", str(times), "--sensor", "vlp16"]
+    assert salo([*base, "--frames", "10", "--out", str(tmp_path / "ten")]) == 2
+    assert "5 poses cover 0.8 s; 10 frames need 0.9 s (at most 9 frames fit" in capsys.readouterr().err
+    assert salo([*base, "--out", str(tmp_path / "seq")]) == 0  # by default, as many frames as the poses cover
+    seq = open_sequence(tmp_path / "seq")
+    assert len(seq) == 9
+    assert np.allclose(np.reshape(seq.manifest["T_world_first_lidar"], (3, 4))[:, 3], [-3.0, 0.0, 0.0])
+    assert np.allclose(seq.poses[:, 0, 3], 0.75 * np.arange(9))
+    assert seq.manifest["times_file"] == str(times.resolve())
+
+
+# ------------------------------------------------------------------ scene seeds
+def test_cli_scene_seed_from_a_parameter_file_or_set(tmp_path, capsys):
+    assert salo(["scenes", "tunnel", "--yaml"]) == 0
+    params = tmp_path / "tunnel.yaml"
+    params.write_text(capsys.readouterr().out.replace("seed: 0", "seed: 4"))
+    small = ["--scene", "tunnel", "--set", "length_m=100", "--set", "approach_m=50", "--sensor", "vlp16",
+             "--frames", "1"]
+    runs = {
+        "file": (["--scene-params", str(params)], 4),
+        "set": (["--set", "seed=5"], 5),
+        "file+set": (["--scene-params", str(params), "--set", "seed=6"], 6),  # --set wins over the file
+        "agree": (["--scene-params", str(params), "--seed", "4"], 4),
+        "default": ([], 0),
+    }
+    for name, (extra, seed) in runs.items():
+        assert salo(["simulate", *small, *extra, "--out", str(tmp_path / name)]) == 0, name
+        m = open_sequence(tmp_path / name).manifest
+        assert m["scene_seed"] == seed and m["seed"] == seed and m["scene_params"]["seed"] == seed, name
+
+
+# ------------------------------------------------------------------ .bin files
+def test_bin_whose_size_is_not_whole_points_is_refused_on_every_path(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    good = rng.normal(0, 10, (6250, 3))
+    bad_bytes = np.zeros(100_003, dtype=np.uint8).tobytes()  # np.fromfile alone made 6,250 points of it
+    words = "size 100,003 bytes is not a whole number of 16-byte points"
+    # a plain scan folder
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    write_bin(scans / "000000.bin", good, np.zeros(6250))
+    (scans / "000001.bin").write_bytes(bad_bytes)
+    with pytest.raises(DatasetError, match=f"000001.bin: {words}"):
+        open_sequence(scans, sensor="vlp16")
+    with pytest.raises(DatasetError, match=f"000001.bin: {words}"):
+        read_bin(scans / "000001.bin")
+    assert read_bin(scans / "000000.bin").shape == (6250, 4)
+    # a KITTI sequence folder
+    kitti = tmp_path / "kitti"
+    (kitti / "velodyne").mkdir(parents=True)
+    (kitti / "calib.txt").write_text("Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n")
+    write_bin(kitti / "velodyne/000000.bin", good, np.zeros(6250))
+    (kitti / "velodyne/000001.bin").write_bytes(bad_bytes)
+    with pytest.raises(DatasetError, match=f"000001.bin: {words}"):
+        open_sequence(kitti)
+    # a simulated sequence
+    simulate(tmp_path / "sim")
+    (tmp_path / "sim/velodyne/000002.bin").write_bytes(bad_bytes)
+    with pytest.raises(DatasetError, match=f"000002.bin: {words}"):
+        open_sequence(tmp_path / "sim")
+    # the command line: one line, exit status 2, nothing written
+    out = tmp_path / "poses_out.txt"
+    for folder in (scans, kitti, tmp_path / "sim"):
+        code = salo(["odometry", str(folder), "--sensor", "vlp16", "--out", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
+
+
+# ------------------------------------------------------------------ leftovers of killed runs
+def _dead_pid() -> int:
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_sigkilled_simulation_leaves_a_partial_folder_the_next_run_removes(tmp_path, caplog):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    mesh, poses = _mesh_and_poses(tmp_path, frames=400)
+    out = tmp_path / "seq"
+    argv = [sys.executable, "-m", "tools.cli", "simulate", "--mesh", str(mesh), "--poses", str(poses),
+            "--sensor", "vlp16", "--out", str(out)]
+    repo = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(argv, cwd=repo, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    partial = tmp_path / f".seq.partial-{proc.pid}"
+    deadline = time.monotonic() + 60
+    while not list((partial / "velodyne").glob("*.bin")) and time.monotonic() < deadline:
+        assert proc.poll() is None, "the simulation ended before it could be killed"
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert partial.is_dir() and not out.exists()  # what SIGKILL leaves
+    # a live writer's folder (this test's parent process stands in for it) is never touched
+    live = tmp_path / f".seq.partial-{os.getppid()}"
+    (live / "velodyne").mkdir(parents=True)
+    frames = 3
+    (tmp_path / "short.txt").write_text("".join(poses.read_text().splitlines(keepends=True)[:frames]))
+    assert salo(["simulate", "--mesh", str(mesh), "--poses", str(tmp_path / "short.txt"), "--sensor", "vlp16",
+                 "--out", str(out)]) == 0
+    assert not partial.exists() and live.is_dir() and len(open_sequence(out)) == frames
+    said = [r.getMessage() for r in caplog.records if "removed" in r.getMessage()]
+    assert len(said) == 1 and str(partial) in said[0] and f"process {proc.pid}, which is no longer running" in said[0]
+
+
+def test_stale_folders_left_alone_when_they_may_still_matter(tmp_path):
+    import os
+
+    out = tmp_path / "seq"
+    dead = _dead_pid()
+    foreign = tmp_path / f".seq.partial-{dead}"  # written by a process on another host (shared disk)
+    foreign.mkdir()
+    (foreign / "INCOMPLETE").write_text("a sequence is being written here\nhost: elsewhere.example\npid: 1\n")
+    mine = tmp_path / f".seq.partial-{os.getpid()}"  # this process's own (the writer reuses it)
+    mine.mkdir()
+    old = tmp_path / f".seq.old-{dead}"  # killed between the two renames of a --force swap
+    old.mkdir()
+    other = tmp_path / f".other.partial-{dead}"  # another output's
+    other.mkdir()
+    assert remove_stale_partials(out) == []
+    assert foreign.is_dir() and mine.is_dir() and old.is_dir() and other.is_dir()
+    out.mkdir()  # once the sequence is in place, the old copy is just trash
+    stale = tmp_path / f".seq.partial-{dead}x"  # not a PID: not ours
+    stale.mkdir()
+    assert remove_stale_partials(out) == [old]
+    assert stale.is_dir()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 
 import numpy as np
 import pytest
@@ -142,3 +143,86 @@ def test_view_of_a_scene_and_of_a_sequence(tmp_path):
     _png_is_a_picture(png)
     with pytest.raises(CommandError, match="neither a sequence folder nor a scene"):
         run(["view", str(tmp_path / "missing"), "--out", str(png)])
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """Replace the renderer with a recorder of what it would draw (the choice of frame and pose is under test)."""
+    calls = []
+
+    def record(vertices, faces, face_labels, path, out_png, T_world_lidar=None, scan_xyz_world=None,
+               scan_ring=None, title="", size=(1800, 900)):
+        calls.append({"vertices": vertices, "faces": faces, "path": path, "T": T_world_lidar,
+                      "xyz": scan_xyz_world, "title": title})
+
+    monkeypatch.setattr("tools.view.render_scene", record)
+    return calls
+
+
+def test_view_shows_the_frame_asked_for(tmp_path, drawn):
+    from simlidar.dataset import open_sequence
+    from simlidar.sensor import load_sensor
+    from simlidar.simulate import simulate_sequence
+
+    world, traj, info = build_world_and_trajectory("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    folder = simulate_sequence(world, traj, load_sensor("vlp16"), tmp_path / "seq", frames=5, t_start=5.0,
+                               info=info)
+    seq = open_sequence(folder)
+    png = str(tmp_path / "x.png")
+    for extra, k in [([], 0), (["--frame", "3"], 3), (["--at", "0.5"], 2), (["--at", "1"], 4), (["--at", "0"], 0),
+                     (["--at", "0.6"], 2)]:
+        assert run(["view", str(folder), *extra, "--out", png]) == 0
+        shown = drawn.pop()
+        T = traj.pose_at(np.array([5.0 + 0.1 * k]))[0]  # the frame's own pose along the scene's path
+        assert np.allclose(shown["T"], T, atol=1e-9), extra
+        assert np.allclose(shown["xyz"], seq[k].points @ T[:3, :3].T + T[:3, 3], atol=1e-6), extra
+        assert f"frame {k} of 5 at t = {0.1 * k:.1f} s" in shown["title"], extra
+    for extra, words in [(["--frame", "5"], "has 5 frames (0..4)"), (["--at", "1.5"], "--at 1.5: expected a fraction"),
+                         (["--at", "0.5", "--frame", "1"], "give --at or --frame, not both")]:
+        with pytest.raises(CommandError, match=re.escape(words)):
+            run(["view", str(folder), *extra, "--out", png])
+    with pytest.raises(CommandError, match="--frame 2: needs a sequence folder"):
+        run(["view", "tunnel", "--frame", "2", "--out", png])
+    assert drawn == []
+
+
+def test_view_of_a_mesh_sequence_from_another_folder(tmp_path, monkeypatch, capsys, drawn):
+    from simlidar.dataset import format_kitti_poses
+    from simlidar.world import World, save_world_ply
+    from tools.cli import main as salo
+
+    work, elsewhere = tmp_path / "work", tmp_path / "elsewhere"
+    work.mkdir()
+    elsewhere.mkdir()
+    box = trimesh_box((20.0, 16.0, 6.0))
+    save_world_ply(World(box.vertices, box.faces, np.zeros(len(box.faces)), ["wall"]), work / "room.ply")
+    T = np.tile(np.eye(4), (4, 1, 1))
+    T[:, 0, 3] = np.linspace(-3, 3, 4)
+    T[:, 2, 3] = 1.8
+    (work / "poses.txt").write_text(format_kitti_poses(T))
+    monkeypatch.chdir(work)  # relative paths, as a user types them
+    assert salo(["simulate", "--mesh", "room.ply", "--poses", "poses.txt", "--sensor", "vlp16", "--out", "seq"]) == 0
+    monkeypatch.chdir(elsewhere)
+    seq = str(work / "seq")
+    assert salo(["view", seq, "--frame", "2", "--out", "v.png"]) == 0
+    shown = drawn.pop()
+    assert np.allclose(shown["T"], T[2]) and len(shown["faces"]) == len(box.faces)
+    assert np.allclose(shown["path"], T[:, :3, 3])
+    capsys.readouterr()
+    with open(work / "room.ply", "ab") as fh:  # the mesh changes after the simulation
+        fh.write(b"\n")
+    assert salo(["view", seq, "--out", "v.png"]) == 2
+    err = capsys.readouterr().err
+    assert f"{work / 'room.ply'}: the mesh changed since" in err and "sha256" in err and len(err.splitlines()) == 1
+    (work / "room.ply").unlink()
+    assert salo(["view", seq, "--out", "v.png"]) == 2
+    assert f"the world mesh {work / 'room.ply'} is missing" in capsys.readouterr().err
+    assert drawn == [] and not (elsewhere / "v.png").exists()
+
+
+def trimesh_box(size):
+    import trimesh
+
+    m = trimesh.creation.box(size)
+    m.invert()  # a room seen from inside
+    return m

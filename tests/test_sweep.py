@@ -192,3 +192,76 @@ def test_sensor_inside_geometry_is_detected():
     T[2, 3] = -1.0
     with pytest.raises(SensorInsideGeometry):
         under.check_clear(T)
+
+
+def room_with_winding(winding: str, size=(10.0, 8.0, 3.0)):
+    """A closed room, floor at z = 0, wound as a user's mesh may be: "outward" (a solid box,
+    trimesh's default), "inward" (faces turned to the room) or "mixed" (every other triangle flipped)."""
+    import trimesh
+
+    from simlidar.world import World
+
+    m = trimesh.creation.box(size)
+    m.apply_translation((0.0, 0.0, size[2] / 2))
+    faces = np.array(m.faces)
+    if winding == "inward":
+        faces = faces[:, ::-1]
+    elif winding == "mixed":
+        faces[::2] = faces[::2, ::-1]
+    return World(m.vertices, faces, np.zeros(len(faces)), ["wall"], source=f"{winding} room",
+                 normals_reliable=False)
+
+
+def analytic_box_range(origin, directions, lo, hi):
+    """Distance from ``origin`` (3,) along unit ``directions`` (n, 3) to the inside of the box [lo, hi], m,
+    and the index of the axis whose wall is hit."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_axis = np.where(directions > 0, (np.asarray(hi) - origin) / directions,
+                          np.where(directions < 0, (np.asarray(lo) - origin) / directions, np.inf))
+    return t_axis.min(axis=1), t_axis.argmin(axis=1)
+
+
+@pytest.mark.parametrize("winding", ["outward", "inward", "mixed"])
+def test_enclosed_room_of_any_winding_ranges_to_the_analytic_walls(winding):
+    world = room_with_winding(winding)
+    lo, hi = np.array([-5.0, -4.0, 0.0]), np.array([5.0, 4.0, 3.0])
+    origin = np.array([1.0, -0.5, 1.8])
+    T = np.eye(4)
+    T[:3, 3] = origin
+    sim = SweepSimulator(world, WIDE)
+    found = sim.check_clear(T)  # a user's mesh: evidence, no refusal
+    assert found.n_hit == found.n_rays
+    if winding == "mixed":
+        assert 0 < found.n_back < found.n_hit
+    else:
+        assert found.n_back == (found.n_hit if winding == "outward" else 0)
+    assert found.enclosed == (winding == "outward")
+    if found.enclosed:
+        with pytest.raises(SensorInsideGeometry, match=r"sensor at \(1.00, -0.50, 1.80\) m is inside geometry"):
+            sim.check_clear(T, strict=True)
+    s = sim.sweep(constant_velocity(start=origin), 0.0)
+    assert len(s) == WIDE.rays_per_sweep  # closed room: every ray returns, back face or not
+    d = s.xyz / np.linalg.norm(s.xyz, axis=1, keepdims=True)
+    t_true, axis = analytic_box_range(origin, d, lo, hi)
+    assert np.abs(s.range_m - t_true).max() < 1e-9
+    assert np.abs(s.true_range_m - t_true).max() < 1e-9
+    n_true = np.zeros_like(d)
+    n_true[np.arange(len(s)), axis] = -np.sign(d[np.arange(len(s)), axis])  # the wall's side facing the sensor
+    assert np.abs(s.normal - n_true).max() < 1e-9
+    assert np.all(np.einsum("ij,ij->i", s.normal, s.true_xyz) < 0)
+    # intensity uses |cos incidence|: back faces are as bright as front faces
+    ref = SweepSimulator(room_with_winding("inward"), WIDE).sweep(constant_velocity(start=origin), 0.0)
+    assert np.allclose(s.intensity, ref.intensity, atol=1e-7)
+
+
+def test_back_face_returns_carry_the_configured_noise():
+    sigma = 0.02
+    sensor = load_preset("vlp16").with_overrides(range_noise_std_m=sigma)
+    origin = np.array([-2.0, 1.0, 1.8])
+    s = scan_of(room_with_winding("outward"), sensor, constant_velocity(start=origin), seed=3)
+    d = s.xyz / np.linalg.norm(s.xyz, axis=1, keepdims=True)
+    t_true, _ = analytic_box_range(origin, d, [-5.0, -4.0, 0.0], [5.0, 4.0, 3.0])
+    res = s.range_m - t_true
+    assert len(res) == sensor.rays_per_sweep
+    assert abs(res.mean()) < 5 * sigma / np.sqrt(len(res))
+    assert abs(res.std() / sigma - 1) < 0.05

@@ -40,11 +40,12 @@ def _add_simulate(sub) -> None:
     )
     p.add_argument("--scene", help="procedural scene (see `salo scenes`); or give --mesh and --poses")
     p.add_argument("--set", dest="scene_overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scene parameter (repeatable)")
-    p.add_argument("--scene-params", type=Path, help="YAML file of scene parameters")
+                   help="override a scene parameter (repeatable); --set seed=N is the seed")
+    p.add_argument("--scene-params", type=Path,
+                   help="YAML file of scene parameters (as `salo scenes NAME --yaml` writes; its seed is the seed)")
     p.add_argument("--speed", type=real_number(0.0, above=True), help="cruise speed along the scene's path, m/s")
-    p.add_argument("--start", type=real_number(), default=0.0,
-                   help="time along the path of the first sweep, s (default 0)")
+    p.add_argument("--start", type=real_number(0.0),
+                   help="time along the scene's path of the first sweep, s (default 0)")
     world = p.add_argument_group("your own world and path (instead of --scene)")
     world.add_argument("--mesh", type=Path, help="world mesh: PLY, OBJ, GLB or STL")
     world.add_argument(
@@ -54,10 +55,24 @@ def _add_simulate(sub) -> None:
         "(interpolated on SE(3) in between)",
     )
     world.add_argument("--times", type=Path, help="times of the --poses lines, s (default: 1/rate apart)")
+    world.add_argument(
+        "--extrapolate",
+        action="store_true",
+        help="allow --frames beyond the last pose: continue the last pose interval's velocity "
+        "(recorded in the manifest); without it that is an error",
+    )
+    world.add_argument(
+        "--strict-inside-check",
+        action="store_true",
+        help="refuse a pose whose probe rays mostly hit back faces, as for a procedural scene (by default a "
+        "--mesh only warns: rooms with outward normals and meshes with inconsistent normals look like that)",
+    )
     p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
     p.add_argument("--frames", type=whole_number(1),
-                   help="number of sweeps (default: one per pose, or 100 along a scene)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+                   help="number of sweeps (default: as many as the poses cover, one per pose without --times; "
+                   "100 along a scene)")
+    p.add_argument("--seed", type=whole_number(0),
+                   help="seed of the noise, and of a --scene (default 0, or the scene parameters' seed)")
     p.add_argument("--noise-std", type=real_number(0.0),
                    help="range noise standard deviation, m (overrides the sensor)")
     p.add_argument(
@@ -79,15 +94,29 @@ def _sensor_from_args(args):
 
 
 def cmd_simulate(args) -> int:
-    from simlidar.dataset import read_kitti_poses, read_times
+    if args.scene is not None:
+        if args.mesh is not None or args.poses is not None:
+            raise CommandError("give either --scene or --mesh/--poses, not both")
+        for flag, given in (("--times", args.times is not None), ("--extrapolate", args.extrapolate)):
+            if given:
+                raise CommandError(f"{flag} applies to --mesh/--poses, not to --scene")
+        return _simulate_scene(args, _sensor_from_args(args))
+    if args.mesh is None or args.poses is None:
+        raise CommandError("give --scene NAME, or --mesh FILE and --poses FILE")
+    for flag, given in (("--set", bool(args.scene_overrides)), ("--scene-params", args.scene_params is not None),
+                        ("--speed", args.speed is not None), ("--start", args.start is not None)):
+        if given:
+            raise CommandError(f"{flag} applies to --scene, not to --mesh/--poses")
+    return _simulate_mesh(args, _sensor_from_args(args))
+
+
+def _simulate_mesh(args, sensor) -> int:
+    import numpy as np
+
+    from simlidar.dataset import read_kitti_poses, read_times, sha256_file
     from simlidar.trajectory import SampledTrajectory
     from simlidar.world import load_world
 
-    sensor = _sensor_from_args(args)
-    if args.scene is not None:
-        return _simulate_scene(args, sensor)
-    if args.mesh is None or args.poses is None:
-        raise CommandError("give --scene NAME, or --mesh FILE and --poses FILE")
     world = load_world(args.mesh)
     poses = read_kitti_poses(args.poses)
     if args.times is not None:
@@ -95,45 +124,93 @@ def cmd_simulate(args) -> int:
         if len(times) != len(poses):
             raise DatasetError(f"{args.times}: {len(times)} times for {len(poses)} poses in {args.poses}")
     else:
-        times = sensor.sweep_period_s * __import__("numpy").arange(len(poses))
+        times = sensor.sweep_period_s * np.arange(len(poses))
     try:
         trajectory = SampledTrajectory(times, poses)
     except ValueError as exc:
         raise DatasetError(f"{args.times or args.poses}: {exc}") from None
-    frames = args.frames if args.frames is not None else len(poses)
-    info = {"mesh": str(args.mesh), "poses_file": str(args.poses), "command": "simulate"}
-    return _run_simulation(world, trajectory, sensor, args, frames, info, where=str(args.poses))
+    fit = _sweeps_covered(times, sensor)
+    frames = args.frames if args.frames is not None else fit
+    info = {
+        "command": "simulate",
+        "mesh": str(args.mesh.resolve()),
+        "mesh_sha256": sha256_file(args.mesh),
+        "poses_file": str(args.poses.resolve()),
+    }
+    if args.times is not None:
+        info["times_file"] = str(args.times.resolve())
+    beyond = _beyond_last_pose(times, sensor, frames)
+    if beyond > 0:
+        need = times[0] + (frames - 1) * sensor.sweep_period_s
+        numbers = (f"{len(poses)} poses cover {times[-1] - times[0]:.1f} s; "
+                   f"{frames} frames need {need - times[0]:.1f} s")
+        if not args.extrapolate:
+            raise CommandError(f"{args.poses}: {numbers} (at most {fit} frames fit: lower --frames, give more "
+                               "poses, or --extrapolate to continue the last pose interval's velocity)")
+        print(f"extrapolating {beyond:.1f} s beyond the last pose ({numbers})", file=sys.stderr)
+        info["extrapolated"] = {"poses_cover_s": round(float(times[-1] - times[0]), 9),
+                                "frames_need_s": round(float(need - times[0]), 9),
+                                "beyond_last_pose_s": round(float(beyond), 9),
+                                "method": "constant velocity of the last pose interval"}
+    return _run_simulation(world, trajectory, sensor, args, frames, info, where=str(args.poses),
+                           t_start=float(times[0]), seed=0 if args.seed is None else args.seed,
+                           strict_inside=True if args.strict_inside_check else None)
+
+
+def _sweeps_covered(times, sensor) -> int:
+    """How many sweeps, one period apart from ``times[0]``, start within the pose times (N,) s."""
+    return int((times[-1] - times[0]) / sensor.sweep_period_s + 1e-9) + 1
+
+
+def _beyond_last_pose(times, sensor, frames: int) -> float:
+    """How far the last sweep's start lies beyond the last pose time, s (0 when the poses cover every frame).
+
+    times: (N,) pose times, s; the first sweep starts at ``times[0]``. The last
+    sweep's own firings run one sweep period past its start; the last pose
+    interval's velocity carries them (as it does with one frame per pose).
+    """
+    need = times[0] + (frames - 1) * sensor.sweep_period_s
+    beyond = float(need - times[-1])
+    return beyond if beyond > 1e-9 * max(1.0, abs(float(times[-1]))) else 0.0
 
 
 def _simulate_scene(args, sensor) -> int:
-    from tools.cli_scenes import build_world_and_trajectory, parse_overrides
+    from tools.cli_scenes import build_world_and_trajectory, parse_overrides, split_seed
 
-    if args.mesh is not None or args.poses is not None:
-        raise CommandError("give either --scene or --mesh/--poses, not both")
     try:
         overrides = parse_overrides(args.scene_overrides, args.scene_params)
+        seed, overrides = split_seed(overrides, args.seed, args.scene_overrides, args.scene_params)
         if args.speed is not None:
             overrides["speed_m_s"] = args.speed
-        world, trajectory, info = build_world_and_trajectory(args.scene, args.seed, overrides)
+        world, trajectory, info = build_world_and_trajectory(args.scene, seed, overrides)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     info["scene_seed"] = info.pop("seed")
-    available = int((trajectory.duration_s - args.start) / sensor.sweep_period_s)
+    start = 0.0 if args.start is None else args.start
+    available = int((trajectory.duration_s - start) / sensor.sweep_period_s)
     frames = args.frames if args.frames is not None else min(available, 100)
     if frames > available:
         raise CommandError(
             f"scene {args.scene}: its path lasts {trajectory.duration_s:.1f} s, room for {available} sweeps "
-            f"after --start {args.start:g} s, not {frames} (lower --frames, or raise --speed or the path length)"
+            f"after --start {start:g} s, not {frames} (lower --frames, or raise --speed or the path length)"
         )
     return _run_simulation(world, trajectory, sensor, args, frames, {**info, "command": "simulate"},
-                           where=f"scene {args.scene}", t_start=args.start)
+                           where=f"scene {args.scene}", t_start=start, seed=seed)
 
 
-def _run_simulation(world, trajectory, sensor, args, frames, info, where, t_start: float = 0.0) -> int:
+def _run_simulation(world, trajectory, sensor, args, frames, info, where, t_start: float, seed: int,
+                    strict_inside: bool | None = None) -> int:
     from simlidar.simulate import simulate_sequence
     from simlidar.sweep import SensorInsideGeometry
 
-    bar = _progress(frames, "sweep", "simulate")
+    bar = None
+
+    def advance(k, scan) -> None:  # the bar starts with the first sweep, after the checks have spoken
+        nonlocal bar
+        if bar is None:
+            bar = _progress(frames, "sweep", "simulate")
+        bar.update(1)
+
     try:
         simulate_sequence(
             world,
@@ -141,17 +218,19 @@ def _run_simulation(world, trajectory, sensor, args, frames, info, where, t_star
             sensor,
             args.out,
             frames=frames,
-            seed=args.seed,
+            seed=seed,
             t_start=t_start,
             motion_distortion=args.motion_distortion,
             info={**info, "noise_std_m": sensor.range_noise_std_m},
             force=args.force,
-            on_frame=lambda k, scan: bar.update(1),
+            on_frame=advance,
+            strict_inside=strict_inside,
         )
     except SensorInsideGeometry as exc:
         raise CommandError(f"{where}: {exc}") from None
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
     print(f"wrote {frames} frames to {args.out}")
     return 0
 

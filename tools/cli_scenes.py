@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from tools.argtypes import whole_number
+
 log = logging.getLogger(__name__)
 
 
@@ -58,18 +60,33 @@ def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> d
     return out
 
 
-def _split_seed(overrides: dict[str, Any], seed: int | None) -> tuple[int, dict[str, Any]]:
-    """The seed (command line first, then the overrides, else 0) and the other overrides."""
+def split_seed(overrides: dict[str, Any], cli_seed: int | None, pairs: list[str] | None = None,
+               yaml_file: Path | None = None) -> tuple[int, dict[str, Any]]:
+    """The scene seed and the other overrides.
+
+    A ``seed`` among the overrides (a parameter file's ``seed:``, as ``salo scenes
+    NAME --yaml`` writes it, or ``--set seed=N``) and ``--seed`` (``cli_seed``) are
+    one setting: either gives it (default 0); if both are given they must agree.
+    ``pairs`` and ``yaml_file`` (what ``parse_overrides`` read) only name the
+    seed's origin in messages. Raises ValueError naming the origin of a bad value
+    (not a whole number >= 0) or both seeds when they differ.
+    """
+    from scenes.params import CommonParams, resolve
+
     rest = dict(overrides)
-    from_file = rest.pop("seed", None)
-    if seed is not None:
-        return int(seed), rest
-    if from_file is None:
-        return 0, rest
+    if "seed" not in rest:
+        return (0 if cli_seed is None else int(cli_seed)), rest
+    value = rest.pop("seed")
+    set_pairs = [p.strip() for p in pairs or [] if p.partition("=")[0].strip() == "seed"]
+    origin = f"--set {set_pairs[-1]}" if set_pairs else f"{yaml_file}" if yaml_file is not None else "seed"
     try:
-        return int(from_file), rest
-    except (TypeError, ValueError):
-        raise ValueError(f"parameter seed: {from_file!r} is not a valid int") from None
+        seed = resolve(CommonParams, {"seed": value}).seed
+    except ValueError as exc:
+        raise ValueError(f"{origin}: {exc}") from None
+    if cli_seed is not None and int(cli_seed) != seed:
+        where = origin if set_pairs else f"seed: {seed} in {origin}"
+        raise ValueError(f"--seed {cli_seed} and {where} differ: both set the scene seed, give one")
+    return seed, rest
 
 
 def _jsonable(value: Any) -> Any:
@@ -103,6 +120,9 @@ def build_world_and_trajectory(name: str, seed: int, overrides: dict[str, Any]):
     """
     from simlidar.world import World
 
+    if "seed" in overrides:
+        raise ValueError(f"parameter seed: give the seed as the seed argument ({seed}), not among the overrides "
+                         f"(seed={overrides['seed']!r})")
     scene = build_scene_checked(name, seed, overrides)
     world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, f"scene:{name}")
     info = {
@@ -118,7 +138,8 @@ def build_world_and_trajectory(name: str, seed: int, overrides: dict[str, Any]):
 
 # ---------------------------------------------------------------- parsers
 def _add_param_args(p) -> None:
-    p.add_argument("--seed", type=int, help="scene seed (default 0, or the parameter file's)")
+    p.add_argument("--seed", type=int, help="scene seed (default 0, or the parameter file's or --set seed=N; "
+                   "both given must agree)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter (repeatable); see `salo scenes NAME`")
     p.add_argument("--params", type=Path, help="YAML file of scene parameters (KEY: VALUE)")
@@ -147,11 +168,14 @@ def add_commands(subparsers) -> None:
                               description="Render off-screen: a 3D view with the path and one scan "
                               "coloured by ring, beside a top-down overview. SOURCE is a scene name "
                               "(one scan is simulated along the path) or a simulated sequence folder "
-                              "(its frame 0 is shown in the world it was simulated in).")
+                              "(one of its frames is shown in the world it was simulated in: --frame N, "
+                              "or the frame nearest --at, else frame 0).")
     p.add_argument("source", help="scene name or sequence folder")
     _add_param_args(p)
-    p.add_argument("--at", type=float, default=0.5,
-                   help="scene: where along the trajectory to scan, fraction of its duration (default 0.5)")
+    p.add_argument("--at", type=float,
+                   help="where along the scene's trajectory or the sequence, as a fraction of its duration "
+                   "in [0, 1] (default: 0.5 for a scene, frame 0 of a sequence)")
+    p.add_argument("--frame", type=whole_number(0), help="sequence: show frame N (its scan in the world)")
     p.add_argument("--sensor", default="salo32", help="scene: sensor preset or YAML (default salo32)")
     p.add_argument("--out", type=Path, required=True, help="output PNG")
     p.set_defaults(func=cmd_view)
@@ -195,7 +219,7 @@ def cmd_scenes(args) -> int:
 def _scene_from_args(name: str, args):
     try:
         overrides = parse_overrides(args.overrides, args.params)
-        seed, rest = _split_seed(overrides, args.seed)
+        seed, rest = split_seed(overrides, args.seed, args.overrides, args.params)
         return build_scene_checked(name, seed, rest)
     except ValueError as exc:
         raise _command_error(str(exc)) from None
@@ -256,9 +280,13 @@ def cmd_view(args) -> int:
     from simlidar.sweep import SweepSimulator
     from tools.view import render_scene
 
+    if args.at is not None and not 0.0 <= args.at <= 1.0:
+        raise _command_error(f"--at {args.at:g}: expected a fraction of the duration in [0, 1]")
     source = Path(args.source)
     if source.is_dir():
-        view = _sequence_view(source)
+        if args.at is not None and args.frame is not None:
+            raise _command_error("give --at or --frame, not both")
+        view = _sequence_view(source, args.at, args.frame)
     else:
         import scenes
 
@@ -266,12 +294,13 @@ def cmd_view(args) -> int:
             raise _command_error(
                 f"{args.source}: neither a sequence folder nor a scene (known: {', '.join(scenes.SCENES)})"
             )
-        if not 0.0 <= args.at <= 1.0:
-            raise _command_error(f"--at {args.at}: expected a fraction of the trajectory in [0, 1]")
+        if args.frame is not None:
+            raise _command_error(f"--frame {args.frame}: needs a sequence folder; along a scene use --at")
+        at = 0.5 if args.at is None else args.at
         scene = _scene_from_args(args.source, args)
         world, traj, _ = _wrap(scene)
         sensor = load_sensor(args.sensor)
-        t0 = float(args.at * max(traj.duration_s - sensor.sweep_period_s, 0.0))
+        t0 = float(at * max(traj.duration_s - sensor.sweep_period_s, 0.0))
         scan = SweepSimulator(world, sensor, seed=scene.params["seed"]).sweep(traj, t0)
         T = traj.pose_at(np.array([t0]))[0]
         view = {
@@ -293,15 +322,54 @@ def _wrap(scene):
     return world, scene.trajectory, {}
 
 
-def _sequence_view(folder: Path) -> dict:
-    """World, path, world pose and points of frame 0 of a simulated sequence folder."""
-    from simlidar.dataset import open_sequence, read_kitti_poses
+def pick_frame(n: int, times: np.ndarray | None, at: float | None, frame: int | None, name: str = "") -> int:
+    """The frame of an ``n``-frame sequence to show: ``frame``, else the one whose start time
+    (``times``, (n,) s) is nearest the fraction ``at`` of the duration, else 0.
+
+    Raises ValueError for a frame out of range.
+    """
+    if frame is not None:
+        if frame >= n:
+            raise ValueError(f"--frame {frame}: {name or 'the sequence'} has {n} frames (0..{n - 1})")
+        return int(frame)
+    if at is None:
+        return 0
+    if times is None or n < 2:
+        return int(round(at * (n - 1)))
+    target = times[0] + at * (times[-1] - times[0])
+    return int(np.argmin(np.abs(np.asarray(times) - target)))
+
+
+def _sequence_view(folder: Path, at: float | None = None, frame_index: int | None = None) -> dict:
+    """World, path, world pose and points of one frame of a simulated sequence folder.
+
+    The frame's world pose is the manifest's ``T_world_first_lidar`` times its
+    ``poses.txt`` line. A mesh world is read from the manifest's path and checked
+    against its sha256, so a moved or changed file is reported, not drawn.
+    """
+    from simlidar.dataset import DatasetError, open_sequence, sha256_file
     from simlidar.world import load_world
 
     seq = open_sequence(folder)
-    frame = seq[0]
     manifest = seq.manifest
+    where = folder / "manifest.json"
+    if not (manifest.get("scene") or manifest.get("mesh")):
+        raise _command_error(f"{where if manifest else folder}: names neither a scene nor a mesh to draw")
+    try:
+        k = pick_frame(len(seq), seq.times, at, frame_index, str(folder))
+    except ValueError as exc:
+        raise _command_error(str(exc)) from None
+    frame = seq[k]
     ring = frame.ring if frame.ring is not None else np.zeros(len(frame.points), dtype=int)
+    first = manifest.get("T_world_first_lidar")
+    if first is None or len(first) != 12:
+        raise DatasetError(f"{where}: no T_world_first_lidar (12 numbers) to place the frames in the world")
+    T_first = np.eye(4)
+    T_first[:3, :4] = np.reshape(np.asarray(first, dtype=float), (3, 4))
+    T = T_first @ seq.poses[k]
+    path = (T_first @ seq.poses)[:, :3, 3]
+    t_k = float(seq.times[k]) if seq.times is not None else 0.0
+    what = f"frame {k} of {len(seq)} at t = {t_k:.1f} s ({len(frame.points)} points)"
     if manifest.get("scene"):
         params = dict(manifest.get("scene_params") or {})
         # the resolved parameters hold the scene's seed; a top-level "seed" may be the noise's
@@ -309,29 +377,31 @@ def _sequence_view(folder: Path) -> dict:
         try:
             scene = build_scene_checked(manifest["scene"], seed, params)
         except ValueError as exc:
-            raise _command_error(f"{folder / 'manifest.json'}: {exc}") from None
-        t0 = float(seq.times[0]) if seq.times is not None else 0.0
-        T = scene.trajectory.pose_at(np.array([t0]))[0]
+            raise _command_error(f"{where}: {exc}") from None
+        if manifest.get("mesh_sha256") and scene.mesh_hash() != manifest["mesh_sha256"]:
+            log.warning("%s: scene %s seed %d builds a different mesh now than when it was simulated "
+                        "(mesh sha256 differs): the picture may not match the scan", where, scene.name, seed)
         vertices, faces, labels, path = scene.vertices, scene.faces, scene.label_of_face(), scene.path
-        title = f"{folder.name}: scene {scene.name} seed {seed}, frame 0 ({len(frame.points)} points)"
-    elif manifest.get("mesh"):
-        world = load_world(manifest["mesh"])
+        title = f"{folder.name}: scene {scene.name} seed {seed}, {what}"
+    else:
+        mesh = Path(manifest["mesh"])
+        if not mesh.is_file():
+            raise DatasetError(f"{where}: the world mesh {mesh} is missing (moved or deleted since the simulation)")
+        digest = manifest.get("mesh_sha256")
+        if digest:
+            now = sha256_file(mesh)
+            if now != digest:
+                raise DatasetError(f"{mesh}: the mesh changed since {folder} was simulated (sha256 {now[:12]}... "
+                                   f"differs from the manifest's {digest[:12]}...): the picture would show "
+                                   "another world")
+        else:
+            log.warning("%s: no mesh_sha256 (an older sequence): %s is drawn unchecked", where, mesh)
+        world = load_world(mesh)
         vertices, faces = world.vertices, world.faces
         labels = np.asarray(world.object_labels, dtype=object)[world.face_object_id]
-        T = np.eye(4)
-        poses_file = manifest.get("poses_file")
-        if poses_file and Path(poses_file).is_file():
-            world_poses = read_kitti_poses(poses_file)
-            T = world_poses[0]
-            path = world_poses[:, :3, 3]
-        else:
-            log.warning("%s: the manifest names no world pose file; drawing frame 0 at the origin", folder)
-            path = seq.poses[:, :3, 3] if seq.poses is not None else np.zeros((2, 3))
-        title = f"{folder.name}: mesh {Path(manifest['mesh']).name}, frame 0 ({len(frame.points)} points)"
-    else:
-        raise _command_error(f"{folder / 'manifest.json'}: names neither a scene nor a mesh to draw")
+        title = f"{folder.name}: mesh {mesh.name}, {what}"
     return {"vertices": vertices, "faces": faces, "labels": labels, "path": path, "T": T,
             "xyz": frame.points @ T[:3, :3].T + T[:3, 3], "ring": ring, "title": title}
 
 
-__all__ = ["add_commands", "build_world_and_trajectory", "export_scene", "parse_overrides"]
+__all__ = ["add_commands", "build_world_and_trajectory", "export_scene", "parse_overrides", "split_seed"]
