@@ -35,8 +35,12 @@ from .icp import Target
 from .ncf import ncf_keep, normal_covariance_along_beams
 from .normals import estimate_normals
 
-# A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis.
+# A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis,
 MIN_PLANE_EXTENT_SIGMAS = 3.0
+# and holds two scan lines: beam elevations this far apart (a quarter of the finest ring pitch of
+# the presets, 0.26 deg; one scan's rings differ by a whole pitch), or scans this far apart.
+MIN_ELEVATION_SPREAD_RAD = np.radians(0.065)
+MIN_BASELINE_M = 0.3
 _KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
 _KEY_MASK = (1 << _KEY_BITS) - 1
@@ -101,6 +105,25 @@ def plane_normals_valid(estimate, noise_std_m: float, max_curvature: float,
     return wide & flat & np.isfinite(estimate.normals).all(axis=1)
 
 
+def spans_two_scan_lines(beams: np.ndarray, origins: np.ndarray,
+                         min_elevation_spread_rad: float = MIN_ELEVATION_SPREAD_RAD,
+                         min_baseline_m: float = MIN_BASELINE_M) -> np.ndarray:
+    """(M,) bool: a neighbourhood holds points of more than one scan line.
+
+    beams: (M, k, 3) unit beams that measured the points; origins: (M, k, 3) where from, m.
+    Points of one ring seen from one place lie on one cone: their best plane contains
+    the beams, whatever the surface (a ring on rolling ground gives a normal tilted by
+    the ground's curvature along the ring), and motion along the beams, which is what a
+    pitch or a climb does to ground returns, leaves no residual. Two scan lines are two
+    rings (beam elevations differing by more than ``min_elevation_spread_rad``), or the
+    same ring seen from places more than ``min_baseline_m`` apart.
+    """
+    elevation = np.arcsin(np.clip(beams[..., 2], -1.0, 1.0))
+    rings = np.ptp(elevation, axis=1) > min_elevation_spread_rad
+    places = np.linalg.norm(np.ptp(origins, axis=1), axis=1) > min_baseline_m
+    return rings | places
+
+
 @dataclass
 class MapStats:
     """Size of the map after an update: points, occupied voxels, points added and dropped."""
@@ -140,6 +163,7 @@ class LocalMap:
         self.points = np.zeros((0, 3))
         self._keys = np.zeros(0, dtype=np.int64)  # voxel key of each point
         self._beams = np.zeros((0, 3))  # unit direction from the sensor that saw each point
+        self._origins = np.zeros((0, 3))  # sensor position of each point's scan
         # Target normals, estimated when first matched and kept until points arrive nearby:
         # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
         self._normals = np.zeros((0, 3))
@@ -187,6 +211,7 @@ class LocalMap:
         self._keys = np.concatenate([self._keys, keys])
         beams = points - origin
         self._beams = np.concatenate([self._beams, beams / np.linalg.norm(beams, axis=1, keepdims=True)])
+        self._origins = np.concatenate([self._origins, np.broadcast_to(origin, points.shape)])
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
         self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
@@ -205,6 +230,7 @@ class LocalMap:
         drop = in_sorted(self._keys, self._voxel_keys[far])
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
         self.points, self._keys, self._beams = self.points[~drop], self._keys[~drop], self._beams[~drop]
+        self._origins = self._origins[~drop]
         self._normals, self._known, self._uncertain = self._normals[~drop], self._known[~drop], self._uncertain[~drop]
         return int(drop.sum())
 
@@ -218,7 +244,7 @@ class LocalMap:
     def target(self) -> Target:
         """The map as a registration target (world frame): a k-d tree over its points and
         normals estimated on demand for the matched points (nan where no plane)."""
-        points, beams = self.points, self._beams
+        points, beams, origins = self.points, self._beams, self._origins
         tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
@@ -228,7 +254,10 @@ class LocalMap:
             # (a normal's sign does not matter to a point-to-plane residual: r and J flip together)
             est = estimate_normals(points, k=k, query_points=points[rows], tree=tree)
             n = est.normals.copy()
-            n[~plane_normals_valid(est, self.noise_std_m, self.max_curvature)] = np.nan
+            nb = est.neighbour_indices
+            valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)
+            valid &= spans_two_scan_lines(beams[nb], origins[nb])
+            n[~valid] = np.nan
             if self.ncf_c_tau_rad2 is None:
                 return n, None
             nc = normal_covariance_along_beams(points[est.neighbour_indices], beams[est.neighbour_indices],
