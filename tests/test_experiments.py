@@ -101,6 +101,63 @@ def test_true_matches_definition():
     assert not moved[0]  # at a wrong pose the plane test fails: the pose matters
 
 
+def test_map_truth_follows_each_point_from_its_scan():
+    """Two scans of a wall and the ground, the second from 4 m further on and turned by 10 deg; each
+    scan's wall and ground carry their own object ids. Through the map's voxel caps and pruning, every
+    map point gets the truth of the scan point it is: that scan's object id, its true position and
+    normal moved into the world."""
+    from scipy.spatial import cKDTree
+
+    from odometry.config import variant
+    from odometry.filters import FilteredScan
+    from simlidar.sensor import load_sensor
+    from simlidar.sweep import SIDECAR_DTYPE
+    from tools.experiments.map_target import MapFrame, build_map_target
+    from tools.experiments.truth import truth_of_points
+
+    rng = np.random.default_rng(5)
+    poses = [np.eye(4), se3.make(se3.exp(np.array([0, 0, 0, 0, 0, math.radians(10.0)]))[:3, :3], [4.0, 0.5, 0.0])]
+    wall_n, ground_n = np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    frames, world_points, world_ids = [], [], []
+    for j, T in enumerate(poses):
+        # (the second scan sees the wall further on, where the first one left voxels empty)
+        wall = np.column_stack([np.full(600, 6.0), rng.uniform(-8, 8 * j, 600), rng.uniform(-1.5, 2.0, 600)])
+        ground = np.column_stack([rng.uniform(-10, 5.5, 900), rng.uniform(-8, 8, 900), np.full(900, -1.7)])
+        world = np.vstack([wall, ground])
+        ids = np.r_[np.full(600, 1 + 2 * j), np.full(900, 2 + 2 * j)]  # scan 0: 1 wall, 2 ground; scan 1: 3, 4
+        local = se3.transform_points(se3.inverse(T), world)  # the scan's own frame
+        sidecar = np.zeros(len(local), dtype=SIDECAR_DTYPE)
+        sidecar["true_xyz"] = local
+        sidecar["normal"] = np.vstack([np.tile(wall_n, (600, 1)), np.tile(ground_n, (900, 1))]) @ T[:3, :3]
+        sidecar["object_id"] = ids
+        rows = rng.permutation(len(local))  # the raw returns, in another order than the sidecar
+        raw = local[rows]
+        scan = FilteredScan(raw, np.full(raw.shape, np.nan), None, None, np.full(len(raw), np.nan), raw, None,
+                            centroids=raw)
+        frames.append(MapFrame(scan, truth_of_points(raw, cKDTree(raw), rows, sidecar), T))
+        world_points.append(world[rows])
+        world_ids.append(ids[rows])
+    config = variant("salo-map").replace(map_points_per_voxel=3, map_max_distance_m=12.0)
+    built = build_map_target(frames, config, load_sensor("salo32"))
+    points = built.target.points
+    assert len(points) == len(built.local_map) == len(built.truth)
+    # the caps and the pruning acted: the map holds fewer points than it was given
+    assert len(points) < 2 * 1500
+    # where each map point came from, by its coordinates (centroids are copied exactly)
+    d, src = cKDTree(np.vstack(world_points)).query(points)
+    assert d.max() < 1e-9
+    expected = np.concatenate(world_ids)[src]
+    assert set(np.unique(expected)) == {1, 2, 3, 4}  # both scans, both surfaces in the map
+    assert np.array_equal(built.truth.object_id, expected)
+    assert np.allclose(built.truth.true_xyz, points, atol=1e-5)  # positions moved into the world
+    on_wall = np.isin(expected, (1, 3))
+    assert np.allclose(built.truth.normal[on_wall], wall_n, atol=1e-6)
+    assert np.allclose(built.truth.normal[~on_wall], ground_n, atol=1e-6)
+    assert np.allclose(points[on_wall, 0], 6.0) and np.allclose(points[~on_wall, 2], -1.7)
+    with pytest.raises(ValueError, match="at least one"):
+        build_map_target([], config, load_sensor("salo32"))
+
+
 def test_records(tmp_path):
     assert to_jsonable({"a": np.float32(1.5), "b": [np.nan, np.inf], "c": np.arange(2)}) == \
         {"a": 1.5, "b": [None, None], "c": [0, 1]}
