@@ -61,6 +61,21 @@ falls much faster than the distance rejector's (3 deg / 0.3 m: 0.45 raw,
 (5 deg / 0.5 m: 80 % of the pairs within 5 cm, against 99-100 %) on either
 target: on this data GCR does not beat the distance rejector at any level,
 unlike the paper's Fig. 3.
+
+Against a map (``salo experiment rejectors --pairs 20 --targets
+filtered,raw,map``, the same sequences, 10 scans in the map): the threshold is
+the same sensor spacing, now on the map's normals (on the same source points a
+median 32.4 cm, 31.7 cm with the scan's own), but a true match lies a median
+7.5-9.6 cm from the nearest map point at every range (the map's voxels set its
+spacing), where from the raw previous scan it grows from 2.4 cm within 10 m to
+15.8 cm beyond 80 m. With the threshold growing with range (9.6 cm within
+10 m, 57 cm beyond 80 m) GCR keeps 63 % of the true map matches within 10 m,
+73 % at 10-20 m and 99 % beyond 40 m: 0.918 recall at 0.967 precision in all
+(distance rejector 0.993 / 0.967). From perturbed guesses many map sources
+have no threshold at all (no plane match within 1 m at the first iteration: 14 %
+of the candidates at 3 deg / 0.3 m, 55 % at 10 deg / 1 m), which GCR keeps
+unjudged; ICP with GCR against the map ends within 5 cm in 95 % of the pairs at
+5 deg / 0.5 m and 10 deg / 1 m, the distance rejector in 100 %.
 """
 
 from __future__ import annotations
