@@ -125,6 +125,43 @@ def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
     return Matches(np.flatnonzero(found), idx[found], dist[found])
 
 
+def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndarray, config: OdometryConfig
+                  ) -> tuple[Matches, dict]:
+    """The matches the rejectors see: those whose target point has a usable plane.
+
+    A target with normals on demand (a raw scan, a map) has a nan normal where its
+    neighbourhood is no plane: those matches are dropped. A map's normals the NCF
+    found too uncertain are dropped too, unless they are the last evidence of a
+    direction (``odometry.constraints.restore_constraints``, with
+    ``min_constraint_eigenvalue``). A target with fixed normals passes every match.
+
+    Args:
+        m: the candidate matches. target: what they index into.
+        moved: (M, 3) the source points at the current pose, target frame, m.
+        centre: (3,) the point the constraints are taken about (the previous sensor position), m.
+        config: ``min_constraint_eigenvalue`` and ``rotation_scale_m``.
+
+    Returns:
+        The kept matches and their counts: {"plane": with a plane, "ncf": of those NCF-sure,
+        "restored": uncertain ones kept}, or {} for a target with fixed normals.
+    """
+    if target.estimate_normals is None:
+        return m, {}
+    m = m.select(np.isfinite(target.normals_at(m.target_index)[:, 0]))
+    counts = {"plane": len(m)}
+    if target.uncertain is not None:
+        sure = ~target.uncertain[m.target_index]
+        keep = sure
+        if config.min_constraint_eigenvalue > 0 and not sure.all():
+            keep = restore_constraints(moved[m.source_index] - centre, target.normals_at(m.target_index),
+                                       np.ones(len(m), dtype=bool), sure, config.min_constraint_eigenvalue,
+                                       config.rotation_scale_m)
+        counts["ncf"] = int(sure.sum())
+        counts["restored"] = int((keep & ~sure).sum())
+        m = m.select(keep)
+    return m, counts
+
+
 def converged(xi: np.ndarray, T: np.ndarray, config: OdometryConfig) -> bool:
     """Absolute and relative thresholds on the increment ``xi`` (rho m, omega rad)."""
     dt, dr = np.linalg.norm(xi[:3]), np.linalg.norm(xi[3:])
@@ -162,26 +199,13 @@ def register(
     seconds = {"match": 0.0, "reject": 0.0, "estimate": 0.0}
     # The distance rejector's bound also limits the k-d tree search.
     bound = config.max_correspondence_distance_m
-    planes_optional = target.estimate_normals is not None
     for it in range(1, config.max_iterations + 1):
         t0 = time.perf_counter()
         moved = source.points @ T[:3, :3].T + T[:3, 3]
         m = match(moved, target, bound)
         t1 = time.perf_counter()
-        counts = {"candidates": len(source.points)}
-        if planes_optional:
-            m = m.select(np.isfinite(target.normals_at(m.target_index)[:, 0]))
-            counts["plane"] = len(m)
-            if target.uncertain is not None:
-                sure = ~target.uncertain[m.target_index]
-                keep = sure
-                if config.min_constraint_eigenvalue > 0 and not sure.all():
-                    keep = restore_constraints(moved[m.source_index] - centre, target.normals_at(m.target_index),
-                                               np.ones(len(m), dtype=bool), sure, config.min_constraint_eigenvalue,
-                                               config.rotation_scale_m)
-                counts["ncf"] = int(sure.sum())
-                counts["restored"] = int((keep & ~sure).sum())
-                m = m.select(keep)
+        m, gate = plane_matches(m, target, moved, centre, config)
+        counts = {"candidates": len(source.points), **gate}
         if source.gcr_threshold_m is None and source.gcr_thresholds is not None:
             # GCR thresholds from the target's normals at these first matches, turned into the
             # source frame (a point without a match now has no bound: inf, the rejector abstains)

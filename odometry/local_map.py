@@ -171,6 +171,8 @@ class LocalMap:
         self._uncertain = np.zeros(0, dtype=bool)  # the NCF's verdict on each estimated normal
         self._voxel_keys = np.zeros(0, dtype=np.int64)  # sorted occupied voxels
         self._voxel_counts = np.zeros(0, dtype=np.int64)
+        # Optional (N,) values carried with the points (``update``'s payload), None when not used.
+        self._payload: np.ndarray | None = None
         self._tree = background().submit(cKDTree, self.points)
 
     def __len__(self) -> int:
@@ -180,23 +182,46 @@ class LocalMap:
     def empty(self) -> bool:
         return len(self.points) == 0
 
-    def update(self, points_world: np.ndarray, sensor_position_m: np.ndarray) -> MapStats:
+    @property
+    def payload(self) -> np.ndarray | None:
+        """(len,) the payload value of each map point, row for row with ``points``; None without payloads."""
+        return self._payload
+
+    def update(self, points_world: np.ndarray, sensor_position_m: np.ndarray,
+               payload: np.ndarray | None = None) -> MapStats:
         """Add (N, 3) world points where their voxels have room, then drop far points.
+
+        ``payload`` (N,): optional values (any dtype, e.g. row numbers into a table kept
+        elsewhere) that stay with their points through the voxel caps and the pruning
+        (``payload``). A map either carries one from its first update on, or never.
 
         The k-d tree of the new map is built on a background thread (it releases the GIL)
         while the next scan is cleaned and filtered; ``target`` waits for it.
         """
-        added = self._insert(np.asarray(points_world, dtype=np.float64), np.asarray(sensor_position_m, dtype=float))
+        points_world = np.asarray(points_world, dtype=np.float64)
+        if payload is not None:
+            payload = np.asarray(payload)
+            if payload.shape != (len(points_world),):
+                raise ValueError(f"payload must be ({len(points_world)},), got {payload.shape}")
+            if self._payload is None:
+                if not self.empty:
+                    raise ValueError("this map holds points without a payload: give one from the first update")
+                self._payload = np.zeros(0, dtype=payload.dtype)
+        elif self._payload is not None:
+            raise ValueError("this map carries a payload: give one with every update")
+        added = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload)
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
         self._tree = background().submit(cKDTree, self.points, balanced_tree=False, compact_nodes=False)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 
-    def _insert(self, points: np.ndarray, origin: np.ndarray) -> int:
+    def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None) -> int:
         if len(points) == 0:
             return 0
         keys = voxel_keys(points, self.voxel_size_m)
         order = np.argsort(keys, kind="stable")
         keys, points = keys[order], points[order]
+        if payload is not None:
+            payload = payload[order]
         pos = np.searchsorted(self._voxel_keys, keys)
         inside = pos < len(self._voxel_keys)
         known = np.zeros(len(keys), dtype=bool)
@@ -207,6 +232,8 @@ class LocalMap:
         if not accept.any():
             return 0
         keys, points = keys[accept], points[accept]
+        if payload is not None:
+            self._payload = np.concatenate([self._payload, payload[accept]])
         self.points = np.concatenate([self.points, points])
         self._keys = np.concatenate([self._keys, keys])
         beams = points - origin
@@ -232,6 +259,8 @@ class LocalMap:
         self.points, self._keys, self._beams = self.points[~drop], self._keys[~drop], self._beams[~drop]
         self._origins = self._origins[~drop]
         self._normals, self._known, self._uncertain = self._normals[~drop], self._known[~drop], self._uncertain[~drop]
+        if self._payload is not None:
+            self._payload = self._payload[~drop]
         return int(drop.sum())
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:

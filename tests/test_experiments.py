@@ -101,6 +101,63 @@ def test_true_matches_definition():
     assert not moved[0]  # at a wrong pose the plane test fails: the pose matters
 
 
+def test_map_truth_follows_each_point_from_its_scan():
+    """Two scans of a wall and the ground, the second from 4 m further on and turned by 10 deg; each
+    scan's wall and ground carry their own object ids. Through the map's voxel caps and pruning, every
+    map point gets the truth of the scan point it is: that scan's object id, its true position and
+    normal moved into the world."""
+    from scipy.spatial import cKDTree
+
+    from odometry.config import variant
+    from odometry.filters import FilteredScan
+    from simlidar.sensor import load_sensor
+    from simlidar.sweep import SIDECAR_DTYPE
+    from tools.experiments.map_target import MapFrame, build_map_target
+    from tools.experiments.truth import truth_of_points
+
+    rng = np.random.default_rng(5)
+    poses = [np.eye(4), se3.make(se3.exp(np.array([0, 0, 0, 0, 0, math.radians(10.0)]))[:3, :3], [4.0, 0.5, 0.0])]
+    wall_n, ground_n = np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    frames, world_points, world_ids = [], [], []
+    for j, T in enumerate(poses):
+        # (the second scan sees the wall further on, where the first one left voxels empty)
+        wall = np.column_stack([np.full(600, 6.0), rng.uniform(-8, 8 * j, 600), rng.uniform(-1.5, 2.0, 600)])
+        ground = np.column_stack([rng.uniform(-10, 5.5, 900), rng.uniform(-8, 8, 900), np.full(900, -1.7)])
+        world = np.vstack([wall, ground])
+        ids = np.r_[np.full(600, 1 + 2 * j), np.full(900, 2 + 2 * j)]  # scan 0: 1 wall, 2 ground; scan 1: 3, 4
+        local = se3.transform_points(se3.inverse(T), world)  # the scan's own frame
+        sidecar = np.zeros(len(local), dtype=SIDECAR_DTYPE)
+        sidecar["true_xyz"] = local
+        sidecar["normal"] = np.vstack([np.tile(wall_n, (600, 1)), np.tile(ground_n, (900, 1))]) @ T[:3, :3]
+        sidecar["object_id"] = ids
+        rows = rng.permutation(len(local))  # the raw returns, in another order than the sidecar
+        raw = local[rows]
+        scan = FilteredScan(raw, np.full(raw.shape, np.nan), None, None, np.full(len(raw), np.nan), raw, None,
+                            centroids=raw)
+        frames.append(MapFrame(scan, truth_of_points(raw, cKDTree(raw), rows, sidecar), T))
+        world_points.append(world[rows])
+        world_ids.append(ids[rows])
+    config = variant("salo-map").replace(map_points_per_voxel=3, map_max_distance_m=12.0)
+    built = build_map_target(frames, config, load_sensor("salo32"))
+    points = built.target.points
+    assert len(points) == len(built.local_map) == len(built.truth)
+    # the caps and the pruning acted: the map holds fewer points than it was given
+    assert len(points) < 2 * 1500
+    # where each map point came from, by its coordinates (centroids are copied exactly)
+    d, src = cKDTree(np.vstack(world_points)).query(points)
+    assert d.max() < 1e-9
+    expected = np.concatenate(world_ids)[src]
+    assert set(np.unique(expected)) == {1, 2, 3, 4}  # both scans, both surfaces in the map
+    assert np.array_equal(built.truth.object_id, expected)
+    assert np.allclose(built.truth.true_xyz, points, atol=1e-5)  # positions moved into the world
+    on_wall = np.isin(expected, (1, 3))
+    assert np.allclose(built.truth.normal[on_wall], wall_n, atol=1e-6)
+    assert np.allclose(built.truth.normal[~on_wall], ground_n, atol=1e-6)
+    assert np.allclose(points[on_wall, 0], 6.0) and np.allclose(points[~on_wall, 2], -1.7)
+    with pytest.raises(ValueError, match="at least one"):
+        build_map_target([], config, load_sensor("salo32"))
+
+
 def test_records(tmp_path):
     assert to_jsonable({"a": np.float32(1.5), "b": [np.nan, np.inf], "c": np.arange(2)}) == \
         {"a": 1.5, "b": [None, None], "c": [0, 1]}
@@ -212,7 +269,7 @@ def test_salo_not_worse_than_bl_beyond_noise(table_run):
 def rejector_run(cache, results_root):
     from tools.experiments.rejector_study import RejectorStudyParams, run_rejector_study, write_rejector_study
 
-    params = RejectorStudyParams(pairs=3, levels=((0.0, 0.0), (3.0, 0.3)),
+    params = RejectorStudyParams(pairs=3, levels=((0.0, 0.0), (3.0, 0.3)), targets=("filtered", "raw", "map"),
                                  sequences=(CITY.with_changes(frames=4, start_s=10.0),))
     rec = RunRecord(results_root / "rejectors", "rejectors", params.to_dict(), command=["test"]).start()
     result = run_rejector_study(params, cache)
@@ -229,19 +286,33 @@ def test_rejector_study_files_and_values(rejector_run):
     for name in ("translation_error_boxplot.png", "precision_recall.png", "match_distances.png"):
         _png_ok(out / name)
     assert len(result.pairs) == 3
-    assert len(result.registrations) == 3 * 2 * 2 * 2  # pairs x levels x targets x rejectors
+    assert len(result.registrations) == 3 * 2 * 3 * 2  # pairs x levels x targets x rejectors
+    # the map holds the frames before the source (all of them here: fewer than map_frames) and grows
+    assert [p["map_frames"] for p in result.pairs] == [p["source_frame"] for p in result.pairs]
+    sizes = [p["map_points"] for p in result.pairs]
+    assert sizes == sorted(sizes) and sizes[0] < sizes[-1]
     for r in result.registrations:
         if r["l_t_m"] == 0.0:
             assert r["initial_t_err_m"] < 1e-12
         # From the truth or a 3 deg / 0.3 m guess, ICP on a city pair lands within a few cm.
         assert r["t_err_m"] < 0.05, r
     for r in result.pr_summary:
-        assert 0 <= r["precision"] <= 1 and 0 <= r["recall"] <= 1 and r["kept"] <= r["candidates"]
-        assert r["true"] <= r["candidates"]
+        assert r["kept"] <= r["candidates"] and r["true"] <= r["candidates"] and 0 <= r["recall"] <= 1
+        if r["rejector"] != "gcr_unbounded":  # (a scan target's sources all have thresholds: none kept)
+            assert 0 <= r["precision"] <= 1, r
+    pr_keys = {(r["stage"], r["level"], r["target"], r["rejector"]) for r in result.pr_summary}
+    for stage, level in (("true pose", "true pose"), ("initial guess", "0 deg / 0 m"),
+                         ("initial guess", "3 deg / 0.3 m")):
+        for rejector in ("distance", "gcr", "bl_chain", "salo_chain", "plane_gate", "gcr_unbounded"):
+            assert (stage, level, "map", rejector) in pr_keys
+    for level in ("0 deg / 0 m", "3 deg / 0.3 m"):
+        assert {("final estimate", level, "map", c) for c in ("bl_chain", "salo_chain")} <= pr_keys
     at_truth = {(r["target"], r["rejector"]): r for r in result.pr_summary if r["stage"] == "true pose"}
-    for target in ("filtered", "raw"):
-        # At the true pose most nearest-neighbour candidates are true and the distance rejector keeps most.
-        assert at_truth[(target, "distance")]["true_fraction"] > 0.7
+    for target in ("filtered", "raw", "map"):
+        # At the true pose most nearest-neighbour candidates are true (0.91-0.93 for every target when
+        # written; a map whose points' truth was left in their scans' frames gave 0.73) and the distance
+        # rejector keeps most.
+        assert at_truth[(target, "distance")]["true_fraction"] > 0.85
         assert at_truth[(target, "distance")]["recall"] > 0.8
         f = result.finding[target]
         assert f["gcr_recall"] == pytest.approx(at_truth[(target, "gcr")]["recall"])
@@ -249,11 +320,27 @@ def test_rejector_study_files_and_values(rejector_run):
         bins = f["by_incidence"]
         assert bins[0]["incidence_lo_deg"] == 0 and bins[-1]["incidence_hi_deg"] >= 90
         assert sum(b["true_matches_sampled"] for b in bins) > 0
+        # every sampled true match has a range bin too
+        assert sum(b["true_matches_sampled"] for b in f["by_range"]) == sum(b["true_matches_sampled"] for b in bins)
+    # The sensor's sampling spreads with range: true matches lie farther from the nearest raw return far away.
+    raw_by_range = {b["range_lo_m"]: b for b in result.finding["raw"]["by_range"]}
+    assert raw_by_range[20.0]["distance_median_m"] < raw_by_range[80.0]["distance_median_m"]
     # Raw returns are denser than voxel centroids: true matches are closer to their target point.
     assert result.finding["raw"]["true_match_distance_median_m"] < result.finding["filtered"][
         "true_match_distance_median_m"]
+    # Against the map: a plane gate drops some candidates (never all), and on the source points both
+    # sources share, the thresholds from the map's normals at the first matches (turned into the scan's
+    # frame) are those from the scan's own normals, within 20 %: the same sensor spacing.
+    m, f = result.finding["map"], result.finding["filtered"]
+    assert 0.5 < m["plane_gate_kept_fraction"] < 1 and 0.5 < m["plane_gate_recall"] <= 1
+    assert 0 <= m["gcr_unbounded_fraction"] < 0.2
+    shared = m["scan_source_points"]
+    assert shared["true_matches_sampled"] > 100 and shared["distance_median_m"] > 0
+    assert 0.8 < shared["gcr_threshold_median_m"] / f["gcr_threshold_median_m"] < 1.25
+    assert [g["level"] for g in m["initial_guess"]] == ["0 deg / 0 m", "3 deg / 0.3 m"]
     summary = (out / "summary.md").read_text()
     assert "Which target GCR needs" in summary and "![" in summary
+    assert "What GCR's threshold means against a map" in summary and "Map target (shares in %" in summary
 
 
 @pytest.fixture(scope="module")
@@ -327,5 +414,11 @@ def test_cli_commands_parse():
     assert a.methods == ",".join(DEFAULT_METHODS)  # the CLI's spelled-out default is the table's
     a = parser.parse_args(["experiment", "rejectors", "--levels", "1:0.1,3:0.3", "--pairs", "10"])
     assert a.func is cli_experiment.cmd_rejectors and cli_experiment._parse_levels(a.levels) == ((1, 0.1), (3, 0.3))
+    from tools.experiments.rejector_study import TARGETS, RejectorStudyParams
+
+    assert a.targets == ",".join(TARGETS) and a.map_frames == RejectorStudyParams().map_frames  # the study's defaults
+    assert parser.parse_args(["experiment", "rejectors", "--map-frames", "4"]).map_frames == 4
+    with pytest.raises(SystemExit):
+        parser.parse_args(["experiment", "rejectors", "--map-frames", "0"])
     assert parser.parse_args(["experiment", "ncf"]).func is cli_experiment.cmd_ncf
     assert parser.parse_args(["report", "out/x", "--format", "md"]).func is cli_experiment.cmd_report

@@ -44,6 +44,30 @@ def test_map_caps_each_voxel_and_drops_far_points():
     assert m.update(in_one_voxel, np.zeros(3)).added == 5  # the dropped voxel takes points again
 
 
+def test_map_payload_follows_its_points_through_caps_and_pruning():
+    """Each map point keeps the payload given with it: points arrive out of voxel order, full voxels
+    refuse some, and a far voxel is dropped."""
+    rng = np.random.default_rng(3)
+    m = make_map(max_points_per_voxel=3, max_distance_m=10.0)
+    first = rng.uniform(-4.0, 4.0, (200, 3))  # about 2.5 points per voxel, in no particular order
+    m.update(first, np.zeros(3), payload=np.arange(200))
+    second = rng.uniform(-4.0, 8.0, (300, 3))
+    stats = m.update(second, np.array([3.0, 0.0, 0.0]), payload=200 + np.arange(300))
+    assert stats.dropped > 0 and 0 < stats.added < 300  # both the caps and the pruning acted
+    everything = np.vstack([first, second])
+    assert m.payload.shape == (len(m),) and len(np.unique(m.payload)) == len(m)
+    assert np.array_equal(m.points, everything[m.payload])  # row for row
+    with pytest.raises(ValueError, match="every update"):
+        m.update(first[:3], np.zeros(3))
+    with pytest.raises(ValueError, match=r"payload must be \(3,\)"):
+        m.update(first[:3], np.zeros(3), payload=np.arange(4))
+    plain = make_map()
+    plain.update(first, np.zeros(3))
+    assert plain.payload is None
+    with pytest.raises(ValueError, match="first update"):
+        plain.update(first, np.zeros(3), payload=np.arange(200))
+
+
 def test_map_normals_on_a_plane_but_not_on_a_single_ring():
     """A noisy plane seen from several positions gives its normal; points of one line do not define a plane."""
     rng = np.random.default_rng(1)

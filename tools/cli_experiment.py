@@ -92,14 +92,18 @@ def _add_rejectors(sub) -> None:
         help="Sec. IV-A / Fig. 3: GCR against the distance rejector from perturbed initial guesses",
         description="Register scan pairs from noisy initial guesses (rotation about a random axis by an angle "
         "uniform in [-l_r, l_r], translation along a random axis uniform in [-l_t, l_t]) with the distance "
-        "rejector and with GCR, against the filtered and the raw previous scan; translation-error box plots "
-        "per level, and each rejector's precision and recall against the true correspondences.",
+        "rejector and with GCR, against the filtered and the raw previous scan and against a local map of the "
+        "scans before it; translation-error box plots per level, and each rejector's precision and recall "
+        "against the true correspondences.",
     )
     _common(p, "rejectors")
     _sequence_args(p, "city:1,city:2,city:3 (the table's)", REJECTORS_QUICK_FRAMES)
     p.add_argument("--pairs", type=whole_number(1), help="scan pairs (default 100, the paper's; --quick 4)")
     p.add_argument("--levels", help="comma-separated L_R_DEG:L_T_M (default 0:0,1:0.1,3:0.3,5:0.5,10:1)")
-    p.add_argument("--targets", default="filtered,raw", help="match targets (default filtered,raw)")
+    p.add_argument("--targets", default="filtered,raw,map",
+                   help="match targets: filtered, raw (the previous scan), map (default filtered,raw,map)")
+    p.add_argument("--map-frames", type=whole_number(1), default=10,
+                   help="scans before the source in the map target (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the pair and noise draws (default 0)")
     p.set_defaults(func=cmd_rejectors)
 
@@ -275,7 +279,8 @@ def cmd_rejectors(args) -> int:
     levels = _parse_levels(args.levels) if args.levels else (((0.0, 0.0), (5.0, 0.5)) if args.quick
                                                              else DEFAULT_LEVELS)
     params = RejectorStudyParams(pairs=args.pairs or (4 if args.quick else 100), levels=levels, targets=targets,
-                                 sequences=specs, seed=args.seed, config_overrides=_config_overrides(args.config_set))
+                                 sequences=specs, seed=args.seed, config_overrides=_config_overrides(args.config_set),
+                                 map_frames=args.map_frames)
     record = RunRecord(args.out, "rejectors", params.to_dict(), _command_line()).start()
     try:
         result = run_rejector_study(params, args.cache, progress=args.progress)

@@ -22,7 +22,8 @@ METHOD_COLORS = {"ground truth": "black", "BL": "tab:blue", "NCF": "tab:orange",
 METHOD_STYLES = {"BL": ("-", 3.4), "NCF": ("--", 2.2), "SALO": ("-", 1.2), "KISS-ICP": (":", 2.2),
                  "default": ("-", 2.6), "GenZ-ICP": ("-.", 1.6), "small_gicp s2m": ((0, (1, 3)), 2.0)}
 REJECTOR_COLORS = {"distance": "tab:blue", "gcr": "tab:green"}
-TARGET_HATCH = {"filtered": "", "raw": "///"}
+TARGET_HATCH = {"filtered": "", "raw": "///", "map": "..."}
+TARGET_LINES = {"filtered": "-", "raw": "--", "map": ":"}
 # Log-scale plots show errors below this as this (exact zeros have no logarithm).
 LOG_FLOOR_M = 1e-4
 
@@ -260,7 +261,7 @@ def rejector_boxplot(path, registrations: list[dict], params: dict) -> Path:
     levels = [_level(lv) for lv in params["levels"]]
     targets = params["targets"]
     groups = [(rej, t) for t in targets for rej in ("distance", "gcr")]
-    fig = _figure(figsize=(max(8.0, 2.3 * len(levels) + 2), 5.4))
+    fig = _figure(figsize=(max(8.0, (0.45 * len(groups) + 0.5) * len(levels) + 2), 5.4))
     ax = fig.subplots()
     slots = len(groups) + 1
     width = 0.8 / slots
@@ -302,27 +303,49 @@ def rejector_boxplot(path, registrations: list[dict], params: dict) -> Path:
 
 
 def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Path:
-    """Precision and recall of the distance rejector and GCR against the true correspondences."""
+    """Precision and recall of the distance rejector and GCR against the true correspondences.
+
+    Where some candidates' sources have no finite GCR threshold (GCR keeps them unjudged:
+    against a map, no plane match within the bound at the first iteration), the recall
+    panel also shows GCR's recall over the candidates it judges (thin line, triangles).
+    """
+    from .rejector_study import bounded_recall
+
     cats = ["true pose"] + [_level(lv) for lv in params["levels"]]
     fig = _figure(figsize=(max(8.0, 1.5 * len(cats) + 3), 7.0))
     axes = fig.subplots(2, 1, sharex=True)
-    styles = {"filtered": "-", "raw": "--"}
+
+    def row_of(c: str, t: str, rej: str) -> dict | None:
+        stage = "true pose" if c == "true pose" else "initial guess"
+        return next((r for r in pr_summary if r["stage"] == stage and r["level"] == c and r["target"] == t
+                     and r["rejector"] == rej), None)
+
     for ax, key in zip(axes, ("precision", "recall"), strict=True):
         for t in params["targets"]:
             for rej in ("distance", "gcr"):
                 y = []
                 for c in cats:
-                    stage = "true pose" if c == "true pose" else "initial guess"
-                    row = next((r for r in pr_summary if r["stage"] == stage and r["level"] == c
-                                and r["target"] == t and r["rejector"] == rej), None)
+                    row = row_of(c, t, rej)
                     v = None if row is None else row[key]
                     y.append(np.nan if v is None else v)
-                ax.plot(range(len(cats)), y, styles.get(t, "-"), marker="o", color=REJECTOR_COLORS[rej],
+                ax.plot(range(len(cats)), y, TARGET_LINES.get(t, "-"), marker="o", color=REJECTOR_COLORS[rej],
                         label=f"{'GCR' if rej == 'gcr' else 'distance'}, {t} target")
+            if key == "recall":
+                free = [row_of(c, t, "gcr_unbounded") for c in cats]
+                if any(f is not None and f["kept"] > 0 for f in free):
+                    y = []
+                    for c, f in zip(cats, free, strict=True):
+                        g = row_of(c, t, "gcr")
+                        v = None if g is None else bounded_recall(g, f)
+                        y.append(np.nan if v is None else v)
+                    ax.plot(range(len(cats)), y, TARGET_LINES.get(t, "-"), marker="v", lw=1.0,
+                            color=REJECTOR_COLORS["gcr"], alpha=0.6,
+                            label=f"GCR, {t} target: over the candidates with a finite threshold")
         ax.set_ylabel(f"{key} (0-1)")
         ax.set_ylim(-0.02, 1.02)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=9, ncol=2, loc="lower left")
+    axes[0].legend(fontsize=9, ncol=len(params["targets"]), loc="lower left")
+    axes[1].legend(fontsize=8.5, loc="lower left")
     axes[1].set_xticks(range(len(cats)), ["at the\ntrue pose"] +
                        ["initial guess\n" + _level(lv) for lv in params["levels"]])
     axes[1].set_xlabel("where the nearest-neighbour candidates are taken")

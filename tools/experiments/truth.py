@@ -57,6 +57,25 @@ class PointTruth:
     def __len__(self) -> int:
         return len(self.object_id)
 
+    def take(self, rows: np.ndarray) -> PointTruth:
+        """The truth of the points at ``rows`` (K,) indices."""
+        rows = np.asarray(rows)
+        return PointTruth(self.object_id[rows], self.true_xyz[rows], self.normal[rows], self.anchor_distance_m[rows])
+
+    def transformed(self, T: np.ndarray) -> PointTruth:
+        """The same truth in another frame: positions and normals moved by ``T`` (4, 4), e.g. a scan's
+        ``T_world_scan``."""
+        return PointTruth(self.object_id, se3.transform_points(T, self.true_xyz), self.normal @ T[:3, :3].T,
+                          self.anchor_distance_m)
+
+
+def concatenate_truth(parts: list[PointTruth]) -> PointTruth:
+    """One ``PointTruth`` of the points of ``parts`` in order (all in one frame)."""
+    if not parts:
+        return PointTruth(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    return PointTruth(*(np.concatenate([getattr(p, f) for p in parts])
+                        for f in ("object_id", "true_xyz", "normal", "anchor_distance_m")))
+
 
 @dataclass(frozen=True)
 class TruthCriteria:
