@@ -41,6 +41,8 @@ MIN_PLANE_EXTENT_SIGMAS = 3.0
 # the presets, 0.26 deg; one scan's rings differ by a whole pitch), or scans this far apart.
 MIN_ELEVATION_SPREAD_RAD = np.radians(0.065)
 MIN_BASELINE_M = 0.3
+# The map drops far voxels each time the sensor has moved this far, m.
+PRUNE_STRIDE_M = 5.0
 _KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
 _KEY_MASK = (1 << _KEY_BITS) - 1
@@ -144,6 +146,7 @@ class LocalMap:
         normal_neighbours: k of the target normals' kNN among the map points.
         noise_std_m: the range noise sigma, for the planarity test of target normals, m.
         max_curvature: PCL curvature above which a target neighbourhood is not a plane.
+        prune_stride_m: how far the sensor moves between two prunings of far voxels, m.
         ncf_c_tau_rad2: when given, the normal covariance filter also judges the map's
             normals: each neighbour's noise lies along the beam that measured it (kept
             per point from the sensor position at insertion), propagated to the normal
@@ -152,7 +155,7 @@ class LocalMap:
 
     def __init__(self, voxel_size_m: float, max_points_per_voxel: int, max_distance_m: float,
                  normal_neighbours: int, noise_std_m: float, max_curvature: float,
-                 ncf_c_tau_rad2: float | None = None):
+                 ncf_c_tau_rad2: float | None = None, prune_stride_m: float = PRUNE_STRIDE_M):
         self.voxel_size_m = float(voxel_size_m)
         self.max_points_per_voxel = int(max_points_per_voxel)
         self.max_distance_m = float(max_distance_m)
@@ -164,6 +167,8 @@ class LocalMap:
         self._keys = np.zeros(0, dtype=np.int64)  # voxel key of each point
         self._beams = np.zeros((0, 3))  # unit direction from the sensor that saw each point
         self._origins = np.zeros((0, 3))  # sensor position of each point's scan
+        self._pruned_at: np.ndarray | None = None  # sensor position at the last pruning
+        self.prune_stride_m = float(prune_stride_m)
         # Target normals, estimated when first matched and kept until points arrive nearby:
         # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
         self._normals = np.zeros((0, 3))
@@ -243,13 +248,21 @@ class LocalMap:
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
         self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
         # a kNN neighbourhood (< 1 voxel across) of a point next to a changed voxel may have changed
-        self._known[in_sorted(self._keys, neighbourhood_keys(np.unique(keys)))] = False
+        self._known[in_sorted(self._keys, np.unique(keys))] = False
         self._recount(np.concatenate([self._voxel_keys, keys]),
                       np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
         return int(len(keys))
 
     def _prune(self, position: np.ndarray) -> int:
-        """Drop the voxels whose centre is farther than ``max_distance_m`` (a check per voxel, not per point)."""
+        """Drop the voxels whose centre is farther than ``max_distance_m`` (a check per voxel, not per point).
+
+        Checked once the sensor has moved ``prune_stride_m`` since the last check: a map a few
+        metres wider than ``max_distance_m`` for a moment costs nothing, rebuilding every array
+        of the map each frame does.
+        """
+        if self._pruned_at is not None and np.linalg.norm(position - self._pruned_at) < self.prune_stride_m:
+            return 0
+        self._pruned_at = position.copy()
         d = voxel_centres(self._voxel_keys, self.voxel_size_m) - position
         far = np.einsum("ij,ij->i", d, d) > self.max_distance_m**2
         if not far.any():

@@ -13,7 +13,7 @@ from simlidar import se3
 
 def make_map(**kw) -> LocalMap:
     args = {"voxel_size_m": 1.0, "max_points_per_voxel": 20, "max_distance_m": 100.0, "normal_neighbours": 12,
-            "noise_std_m": 0.02, "max_curvature": 0.05}
+            "noise_std_m": 0.02, "max_curvature": 0.05, "prune_stride_m": 0.0}
     return LocalMap(**{**args, **kw})
 
 
