@@ -322,11 +322,13 @@ class Odometry:
 
         t = time.perf_counter()
         deskewing = cfg.deskew and clean.times_s is not None
-        # A scan that needs no normals of its own is voxelised as measured and only its centroids
-        # are de-skewed, each with its voxel's mean firing time (the points of a voxel fire within
-        # microseconds of each other, except at the sweep's seam): far fewer points to move.
-        centroids_first = deskewing and not scan_normals_needed(cfg)
-        if deskewing and not centroids_first:
+        # The scan is voxelised and its normals and NCF computed as measured, and then its ICP points,
+        # normals and centroids are de-skewed, each with its voxel's mean firing time: a voxel's and
+        # a normal's neighbours fire within microseconds of each other (except at the sweep's seam),
+        # so they move rigidly, and the beams the NCF's noise follows start at the sensor's origin
+        # only in the measured frame. Far fewer points to move. (A raw target keeps every de-skewed point.)
+        filter_first = deskewing and cfg.match_target != "raw"
+        if deskewing and not filter_first:
             clean.points = deskew(clean.points, clean.times_s, T_guess, period)
         diag.deskewed = deskewing
         seconds["deskew"] = time.perf_counter() - t
@@ -335,9 +337,9 @@ class Odometry:
             clean.rings = ring_of_points(clean.points, self.sensor)
         scan = filter_scan(clean.points, cfg, clean.rings, self.sensor.range_noise_std_m if self.sensor else None,
                            raw_times_s=clean.times_s if deskewing else None)
-        if centroids_first:
+        if filter_first:
             t = time.perf_counter()
-            scan.points = scan.centroids = deskew(scan.centroids, scan.centroid_times_s, T_guess, period)
+            redeskew_scan(scan, np.eye(4), T_guess, period)
             seconds["deskew"] += time.perf_counter() - t
         diag.filter_counts = scan.counts
         seconds.update(scan.seconds)
