@@ -31,6 +31,7 @@ from simlidar.yaml_file import read_yaml
 NOISE_MODELS = ("range", "isotropic")
 MATCH_TARGETS = ("filtered", "raw", "map")
 NCF_SCOPES = ("scan", "map", "both")
+WEAK_UPDATES = ("prior", "remap")
 GCR_FORMULAS = ("beam", "paper")
 
 
@@ -103,9 +104,12 @@ class OdometryConfig:
             eigenvalue of the per-match information (H / N) is below this.
     Degeneracy (``odometry.constraints``):
         min_constraint_eigenvalue: a direction of motion whose scaled information per
-            match is below this is weakly constrained: the ICP leaves it at the motion
-            prior (solution remapping) and the NCF may not push a direction below it
-            (0 = neither).
+            match is below this is weakly constrained: the ICP holds it to the motion
+            prior (``weak_direction_update``) and the NCF may not push a direction below
+            it (0 = neither).
+        weak_direction_update: "prior" (a constant-velocity motion prior of that
+            information per match: weak directions blend data and prior) or "remap"
+            (solution remapping: weak directions get no update at all).
         rotation_scale_m: the length L that makes rotation commensurate with
             translation in those eigenvalues (rows ``[n, (p x n) / L]``).
     """
@@ -145,6 +149,7 @@ class OdometryConfig:
     max_prediction_error_deg: float = 10.0
     degenerate_eigenvalue: float = 0.01
     min_constraint_eigenvalue: float = 0.0
+    weak_direction_update: str = "prior"
     rotation_scale_m: float = 10.0
 
     def __post_init__(self) -> None:
@@ -184,6 +189,9 @@ class OdometryConfig:
             fail("gcr_formula", f"must be one of {', '.join(GCR_FORMULAS)}, got {self.gcr_formula!r}")
         if self.match_target not in MATCH_TARGETS:
             fail("match_target", f"must be one of {', '.join(MATCH_TARGETS)}, got {self.match_target!r}")
+        if self.weak_direction_update not in WEAK_UPDATES:
+            fail("weak_direction_update",
+                 f"must be one of {', '.join(WEAK_UPDATES)}, got {self.weak_direction_update!r}")
         if self.ncf_applies_to not in NCF_SCOPES:
             fail("ncf_applies_to", f"must be one of {', '.join(NCF_SCOPES)}, got {self.ncf_applies_to!r}")
         if self.ncf_applies_to != "scan" and self.match_target != "map":

@@ -57,21 +57,40 @@ class Solve:
 
 
 def remapped_step(H: np.ndarray, g: np.ndarray, n: int, rotation_scale_m: float,
-                  min_eigenvalue: float = 0.0, rcond: float = 1e-10) -> Solve:
-    """Solve ``H x = -g`` in the scaled eigenbasis, leaving weak directions unchanged.
+                  min_eigenvalue: float = 0.0, rcond: float = 1e-10, mode: str = "remap",
+                  deviation: np.ndarray | None = None) -> Solve:
+    """Solve ``H x = -g`` in the scaled eigenbasis, with weak directions held to the prior.
 
     H: (6, 6) ``J^T J`` in (rho, omega); g: (6,) ``J^T r``; n: number of matches.
-    Directions with scaled eigenvalue per match below ``min_eigenvalue`` (0: none)
-    or numerically zero (``rcond`` of the largest) get no update.
+    Numerically zero directions (``rcond`` of the largest eigenvalue) get no update. Then,
+    with ``min_eigenvalue`` = lambda > 0 (scaled, per match):
+
+    - ``mode="remap"``: directions below lambda get no update (solution remapping: the
+      estimate keeps the prior there, whatever the data say, frame after frame);
+    - ``mode="prior"``: a Gaussian motion prior of information lambda per match in every
+      direction (maximum a posteriori): minimise ``|J x + r|^2 + n lambda |dev + x|^2`` in
+      scaled coordinates, ``deviation`` (6,) being the current estimate's offset from the
+      prior (the ICP's initial guess). A direction of information w ends at the blend
+      ``(w data + lambda prior) / (w + lambda)``: below lambda it follows the prior, far above
+      it the data, and a weak but consistent signal (an acceleration along a tunnel-like
+      road) still moves the estimate, which the next frame's prediction carries on.
+
+    ``Solve.remapped`` counts the directions below lambda.
     """
     d = scale_matrix(rotation_scale_m)
     Hs = H * d[:, None] * d[None, :] / max(n, 1)
     gs = g * d / max(n, 1)
     w, V = np.linalg.eigh(Hs)
     numeric = w > rcond * max(w[-1], 1e-300)
-    solved = numeric & (w >= min_eigenvalue)
-    y = -(V[:, solved] @ ((V[:, solved].T @ gs) / w[solved]))
-    return Solve(d * y, int(numeric.sum()), int((numeric & ~solved).sum()), w)
+    weak = numeric & (w < min_eigenvalue)
+    if mode == "prior" and min_eigenvalue > 0:
+        dev = np.zeros(6) if deviation is None else deviation / d
+        b = V[:, numeric].T @ (gs + min_eigenvalue * dev)
+        y = -(V[:, numeric] @ (b / (w[numeric] + min_eigenvalue)))
+    else:
+        solved = numeric & ~weak
+        y = -(V[:, solved] @ ((V[:, solved].T @ gs) / w[solved]))
+    return Solve(d * y, int(numeric.sum()), int(weak.sum()), w)
 
 
 def weakest_translation(H: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

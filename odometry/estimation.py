@@ -43,18 +43,21 @@ class PlaneStep:
 
 def point_to_plane_step(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray,
                         rcond: float = 1e-10, min_eigenvalue: float = 0.0,
-                        rotation_scale_m: float = 10.0) -> PlaneStep:
+                        rotation_scale_m: float = 10.0, mode: str = "remap",
+                        deviation: np.ndarray | None = None) -> PlaneStep:
     """Solve the linearised point-to-plane problem for (N, 3) matched points and normals.
 
     A rank-deficient system (fewer than 6 constrained directions) is solved in the
     least-squares minimum-norm sense, leaving unconstrained directions unchanged;
     so are directions whose scaled information per match is below ``min_eigenvalue``
-    (``odometry.constraints``; 0 = only the numerically unconstrained ones).
+    (``odometry.constraints``; 0 = only the numerically unconstrained ones), or, with
+    ``mode="prior"``, held to the prior by a motion prior of that information per match
+    (``deviation``: the current estimate's offset from it, (6,) twist).
     """
     r = np.einsum("ij,ij->i", target_normals, source - target)
     J = np.hstack([target_normals, np.cross(source, target_normals)])
     H = J.T @ J
     g = J.T @ r
-    solve = remapped_step(H, g, len(r), rotation_scale_m, min_eigenvalue, rcond)
+    solve = remapped_step(H, g, len(r), rotation_scale_m, min_eigenvalue, rcond, mode, deviation)
     return PlaneStep(se3.exp(solve.xi), solve.xi, H, solve.rank,
                      float(np.sqrt(np.mean(r**2))) if len(r) else 0.0, solve.remapped)

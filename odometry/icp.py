@@ -224,9 +224,16 @@ def register(
         if len(m) < config.min_points:
             res.singular = True
             break
+        deviation = None
+        if config.weak_direction_update == "prior" and config.min_constraint_eigenvalue > 0:
+            # the estimate's offset from the prior (T_init), as a twist about the centre
+            E = T @ se3.inverse(T_init)
+            E[:3, 3] += E[:3, :3] @ centre - centre
+            deviation = se3.log(E)
         step = point_to_plane_step(moved[m.source_index] - centre, target.points[m.target_index] - centre,
                                    target.normals_at(m.target_index), min_eigenvalue=config.min_constraint_eigenvalue,
-                                   rotation_scale_m=config.rotation_scale_m)
+                                   rotation_scale_m=config.rotation_scale_m, mode=config.weak_direction_update,
+                                   deviation=deviation)
         seconds["estimate"] += time.perf_counter() - t2
         res.iterations, res.rms_m, res.H, res.remapped = it, step.rms_m, step.H, step.remapped
         if step.rank < 6:

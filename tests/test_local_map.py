@@ -151,3 +151,27 @@ def test_orthonormalize_stops_rounding_feedback():
     def err(A):
         return np.abs(A[:3, :3] @ A[:3, :3].T - np.eye(3)).max()
     assert err(drifting) > 1e-6 and err(fixed) < 1e-12
+
+
+def test_prior_step_blends_data_and_prior_by_their_information():
+    """With a motion prior of information lambda per match, a direction of information w ends at
+    w / (w + lambda) of the data's answer (from a deviation of zero), and a strong one at the data's."""
+    rng = np.random.default_rng(4)
+    n = 3000
+    normals = np.zeros((n, 3))
+    normals[:1470, 1] = 1.0
+    normals[1470:2940, 2] = 1.0
+    normals[2940:, 0] = 1.0  # 2 % of the matches see x
+    points = rng.uniform(-10, 10, (n, 3))
+    truth = np.array([0.05, -0.02, 0.01, 0.0, 0.0, 0.0])
+    J = np.hstack([normals, np.cross(points, normals)])
+    r = -J @ truth
+    H, g = J.T @ J, J.T @ r
+    lam = 0.02
+    s = remapped_step(H, g, n, rotation_scale_m=10.0, min_eigenvalue=lam, mode="prior", deviation=np.zeros(6))
+    w_x = 60 / n
+    assert s.xi[0] == pytest.approx(truth[0] * w_x / (w_x + lam), rel=0.05)
+    assert np.allclose(s.xi[1:3], truth[1:3], rtol=0.1)  # y, z: information 0.49 >> lambda
+    # already off the prior by +3 cm in x: the prior pulls back, the data push on
+    s2 = remapped_step(H, g, n, 10.0, lam, mode="prior", deviation=np.array([0.03, 0, 0, 0, 0, 0]))
+    assert s2.xi[0] == pytest.approx((w_x * truth[0] - lam * 0.03) / (w_x + lam), rel=0.05)
