@@ -61,6 +61,11 @@ def test_seed_split_and_what_the_suite_draws():
     assert all(len(v) == 2 and len({x[:3] for x in v}) == 1 for v in pairs.values())
     assert all(0.01 <= s.noise_std_m <= 0.03 for s in seqs)
     assert suite(EVALUATION_SEEDS) == seqs  # deterministic
+    # a subset of the families draws the same sequences as the whole suite
+    subset = suite(EVALUATION_SEEDS, families=("tunnel", "forest"))
+    assert subset and set(subset) == {s for s in seqs if s.family in ("tunnel", "forest")}
+    with pytest.raises(ValueError, match="unknown family"):
+        suite(EVALUATION_SEEDS, families=("moon",))
     with pytest.raises(ValueError, match="other split"):
         GeneralizeParams(split="evaluation", seeds=(TUNING_SEEDS[0],))
     with pytest.raises(ValueError, match="unknown method"):

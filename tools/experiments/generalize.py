@@ -92,8 +92,13 @@ def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[
     from scenes.families import FAMILIES
 
     families = tuple(families or FAMILIES)
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown family {unknown[0]!r} (known: {', '.join(FAMILIES)})")
     out = []
-    for fi, family in enumerate(families):
+    for family in families:
+        # the family's place in the whole suite, so that a subset of families draws the same sequences
+        fi = list(FAMILIES).index(family)
         for si, seed in enumerate(seeds):
             rng = np.random.default_rng([zlib.crc32(family.encode()), int(seed), 0x6E4])
             sensor = SENSORS[(fi * len(seeds) + si + seeds[0]) % len(SENSORS)]
