@@ -10,19 +10,12 @@ import pytest
 from helpers import box_room, constant_velocity
 
 from simlidar import se3
-from simlidar.dataset import (
-    DatasetError,
-    camera_poses_to_lidar,
-    format_kitti_poses,
-    open_sequence,
-    read_bin,
-    read_kitti_poses,
-    remove_stale_partials,
-    sha256_file,
-    write_bin,
-    write_ply_scan,
-)
+from simlidar.dataset import open_sequence
+from simlidar.formats.atomic import remove_stale_partials, sha256_file
+from simlidar.formats.kitti import camera_poses_to_lidar, format_kitti_poses, read_bin, read_kitti_poses, write_bin
+from simlidar.formats.ply import write_ply_scan
 from simlidar.sensor import load_preset
+from simlidar.sequence import DatasetError
 from simlidar.simulate import simulate_sequence
 from simlidar.sweep import SweepSimulator
 from simlidar.world import save_world_ply

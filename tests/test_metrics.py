@@ -14,7 +14,8 @@ import pytest
 
 from odometry import metrics as M
 from simlidar import se3
-from simlidar.dataset import DatasetError, format_kitti_poses, read_kitti_poses
+from simlidar.formats.kitti import format_kitti_poses, read_kitti_poses
+from simlidar.sequence import DatasetError
 
 REPO = Path(__file__).resolve().parents[1]
 

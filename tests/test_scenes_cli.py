@@ -187,7 +187,7 @@ def test_view_shows_the_frame_asked_for(tmp_path, drawn):
 
 
 def test_view_of_a_mesh_sequence_from_another_folder(tmp_path, monkeypatch, capsys, drawn):
-    from simlidar.dataset import format_kitti_poses
+    from simlidar.formats.kitti import format_kitti_poses
     from simlidar.world import World, save_world_ply
     from tools.cli import main as salo
 

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from odometry.metrics import evaluate_trajectory
-from simlidar.dataset import read_kitti_poses
+from simlidar.formats.kitti import read_kitti_poses
 from tools import cli
 from tools.sweep import (
     DaskExecutor,

@@ -26,7 +26,7 @@ import numpy as np
 from odometry.config import DEFAULT_VARIANT, variant
 from odometry.metrics import evaluate_trajectory
 from odometry.pipeline import STAGES, Odometry
-from simlidar.dataset import deskew_times
+from simlidar.sequence import deskew_times
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
 
 OURS = ("bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")

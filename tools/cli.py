@@ -11,8 +11,8 @@ import logging
 import sys
 from pathlib import Path
 
-from simlidar.dataset import DatasetError
 from simlidar.sensor import SensorError, load_sensor, preset_names
+from simlidar.sequence import DatasetError
 from tools.argtypes import real_number, whole_number
 
 # Errors that are the user's input, reported in one line without a traceback.
@@ -113,7 +113,8 @@ def cmd_simulate(args) -> int:
 def _simulate_mesh(args, sensor) -> int:
     import numpy as np
 
-    from simlidar.dataset import read_kitti_poses, read_times, sha256_file
+    from simlidar.formats.atomic import sha256_file
+    from simlidar.formats.kitti import read_kitti_poses, read_times
     from simlidar.trajectory import SampledTrajectory
     from simlidar.world import load_world
 
@@ -294,15 +295,12 @@ def parse_assignments(pairs: list[str]) -> dict:
 
 def cmd_odometry(args) -> int:
     from odometry.config import ConfigError, config_from_dict, load_config, variant
-    from odometry.pipeline import (
-        OdometryError,
-        default_times,
-        run_sequence,
-        write_diagnostics_csv,
-        write_kitti_poses,
-        write_tum,
-    )
-    from simlidar.dataset import atomic_write_text, open_sequence
+    from odometry.pipeline import OdometryError, run_sequence, write_diagnostics_csv
+    from simlidar.dataset import open_sequence
+    from simlidar.formats.atomic import atomic_write_text
+    from simlidar.formats.kitti import write_kitti_poses
+    from simlidar.formats.tum import write_tum
+    from simlidar.sequence import frame_times
 
     try:
         config = variant(args.variant)
@@ -332,7 +330,7 @@ def cmd_odometry(args) -> int:
     write_diagnostics_csv(diagnostics_csv, run.diagnostics)
     atomic_write_text(out.with_name(out.stem + "_config.yaml"), config.to_yaml())
     if args.tum:
-        times = run.times_s if run.times_s is not None else default_times(len(run.poses), seq.sensor)
+        times = run.times_s if run.times_s is not None else frame_times(len(run.poses), seq.sensor)
         write_tum(out.with_suffix(".tum"), run.poses, times)
     from odometry.pipeline import degenerate_stretches
 

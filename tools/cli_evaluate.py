@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simlidar.dataset import DatasetError
+from simlidar.sequence import DatasetError
 from tools.argtypes import whole_number
 
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
@@ -56,7 +56,7 @@ def add_commands(subparsers) -> None:
 
 def load_pair(gt_path: Path, est_path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Read both pose files -> two (N, 4, 4) arrays; DatasetError if their frame counts differ."""
-    from simlidar.dataset import read_kitti_poses
+    from simlidar.formats.kitti import read_kitti_poses
 
     T_gt, T_est = read_kitti_poses(gt_path), read_kitti_poses(est_path)
     if len(T_gt) != len(T_est):

@@ -347,7 +347,9 @@ def _sequence_view(folder: Path, at: float | None = None, frame_index: int | Non
     ``poses.txt`` line. A mesh world is read from the manifest's path and checked
     against its sha256, so a moved or changed file is reported, not drawn.
     """
-    from simlidar.dataset import DatasetError, open_sequence, sha256_file
+    from simlidar.dataset import open_sequence
+    from simlidar.formats.atomic import sha256_file
+    from simlidar.sequence import DatasetError
     from simlidar.world import load_world
 
     seq = open_sequence(folder)

@@ -78,8 +78,9 @@ def demo_table(rows: list[dict]) -> str:
 def run_demo(out_dir: str | Path = "out/demo", frames: int = DEMO_FRAMES, progress: bool = True) -> dict:
     """Simulate, run BL / NCF / SALO, print the table, write the plots; returns the results.json content."""
     from odometry.metrics import trajectory_distances
-    from odometry.pipeline import write_diagnostics_csv, write_kitti_poses
+    from odometry.pipeline import write_diagnostics_csv
     from simlidar.dataset import open_sequence
+    from simlidar.formats.kitti import write_kitti_poses
     from tools.experiments import plots
     from tools.experiments.records import RunRecord, write_json
     from tools.experiments.suite import SequenceSpec, ensure_sequence

@@ -299,7 +299,7 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
 
 
 def _write_poses(record: RunRecord, res: dict) -> None:
-    from odometry.pipeline import write_kitti_poses
+    from simlidar.formats.kitti import write_kitti_poses
 
     if "gt" in res:
         write_kitti_poses(record.path(f"poses/{res['name']}/gt.txt"), res["gt"])

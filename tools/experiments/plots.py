@@ -30,7 +30,7 @@ LOG_FLOOR_M = 1e-4
 
 def save_png(fig, path: str | Path, dpi: int = 110) -> Path:
     """Render ``fig`` to PNG in memory and write it atomically (a reader never sees half a file)."""
-    from simlidar.dataset import atomic_write_bytes
+    from simlidar.formats.atomic import atomic_write_bytes
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")  # never crop a legend or a label

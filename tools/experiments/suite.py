@@ -130,7 +130,8 @@ def spec_key(spec: SequenceSpec, mesh_sha256: str) -> str:
 
 
 def _complete(folder: Path, frames: int) -> bool:
-    from simlidar.dataset import DatasetError, open_sequence
+    from simlidar.dataset import open_sequence
+    from simlidar.sequence import DatasetError
 
     if not (folder / "manifest.json").is_file():
         return False

@@ -229,14 +229,15 @@ def run_table(params: TableParams, cache_dir: str | Path, record: RunRecord | No
                 _write_method_files(record, spec.name, methods[m])
         results.append(SequenceResult(spec, folder, seq.poses, degeneracy_summary(folder), methods))
         if record is not None:
-            from odometry.pipeline import write_kitti_poses
+            from simlidar.formats.kitti import write_kitti_poses
 
             write_kitti_poses(record.path(f"poses/{spec.name}/gt.txt"), seq.poses)
     return TableResult(params, results)
 
 
 def _write_method_files(record: RunRecord, seq_name: str, res: MethodResult) -> None:
-    from odometry.pipeline import write_diagnostics_csv, write_kitti_poses
+    from odometry.pipeline import write_diagnostics_csv
+    from simlidar.formats.kitti import write_kitti_poses
 
     if not res.available:
         return
@@ -435,7 +436,7 @@ def load_table_result(run_dir: str | Path) -> TableResult:
     """
     import json
 
-    from simlidar.dataset import read_kitti_poses
+    from simlidar.formats.kitti import read_kitti_poses
 
     run = Path(run_dir)
     res = json.loads((run / "results.json").read_text())

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from odometry.config import DEFAULT_VARIANT
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 
 from .spec import SweepSpec, spec_from_dict
 

@@ -22,7 +22,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from odometry.config import OdometryConfig
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 from simlidar.sensor import LidarModel
 
 from .store import PARAMS_FILE, Store
@@ -183,8 +183,9 @@ class _Failure(Exception):
 
 def _run_and_evaluate(job: RunJob, sequence_dir: Path, run_dir: Path, timings: dict) -> dict:
     from odometry.metrics import evaluate_trajectory
-    from odometry.pipeline import run_sequence, write_diagnostics_csv, write_kitti_poses
-    from simlidar.dataset import open_sequence, read_kitti_poses
+    from odometry.pipeline import run_sequence, write_diagnostics_csv
+    from simlidar.dataset import open_sequence
+    from simlidar.formats.kitti import read_kitti_poses, write_kitti_poses
 
     seq = open_sequence(sequence_dir)
     poses_path = run_dir / "poses.txt"
