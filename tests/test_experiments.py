@@ -403,7 +403,7 @@ def test_report_html_and_markdown(table_run, rejector_run, ncf_run, results_root
 
 
 def test_cli_commands_parse():
-    from tools import cli_experiment
+    from tools.cli import experiment as cli_experiment
 
     parser = argparse.ArgumentParser(prog="salo")
     cli_experiment.add_commands(parser.add_subparsers(dest="command", required=True))

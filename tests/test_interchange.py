@@ -171,7 +171,7 @@ def test_odometry_runs_on_the_bag(seq, bag, tmp_path):
 
 
 def test_salo_odometry_on_an_exported_bag(seq_dir, tmp_path):
-    from tools import cli_export
+    from tools.cli import export as cli_export
     from tools.cli import main as salo
 
     parser = argparse.ArgumentParser()

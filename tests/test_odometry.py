@@ -17,7 +17,7 @@ from simlidar.dataset import open_sequence
 from simlidar.sensor import load_preset
 from simlidar.simulate import simulate_sequence
 from simlidar.sweep import SweepSimulator
-from tools.cli_scenes import build_world_and_trajectory
+from tools.worlds import build_world_and_trajectory
 
 SENSOR = load_preset("salo32")  # 2 cm range noise
 

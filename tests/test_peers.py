@@ -150,7 +150,7 @@ def drives(tmp_path_factory):
     from simlidar.dataset import open_sequence
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.worlds import build_world_and_trajectory
 
     world, path, _ = build_world_and_trajectory("city", 1, {})
     trajectory = YawOscillation(path, math.radians(YAW_AMPLITUDE_DEG), YAW_PERIOD_S)

@@ -12,8 +12,9 @@ import yaml
 
 import scenes
 from simlidar.world import load_world
-from tools.cli import CommandError
-from tools.cli_scenes import add_commands, build_world_and_trajectory, parse_overrides
+from tools.cli.common import CommandError, parse_overrides
+from tools.cli.scenes import add_commands
+from tools.worlds import build_world_and_trajectory
 
 SMALL_CITY = ["--set", "streets_x=2", "--set", "streets_y=2", "--set", "route_blocks=1"]
 
@@ -111,7 +112,7 @@ def test_scene_command_errors_name_the_problem(tmp_path):
 def test_world_and_trajectory_for_the_simulator():
     world, traj, info = build_world_and_trajectory("tunnel", 3, {"length_m": "200"})
     json.dumps(info)  # goes into the manifest
-    assert info["scene"] == "tunnel" and info["seed"] == 3 and info["scene_params"]["length_m"] == 200.0
+    assert info["scene"] == "tunnel" and info["scene_seed"] == 3 and info["scene_params"]["length_m"] == 200.0
     again = scenes.build_scene(info["scene"], **info["scene_params"])  # the manifest rebuilds the world
     assert again.mesh_hash() == info["mesh_sha256"]
     assert len(world.faces) == again.n_triangles and world.object_labels == again.object_labels

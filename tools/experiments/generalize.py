@@ -111,10 +111,10 @@ def simulate(seq: SuiteSequence, progress=None):
     from scenes.families import draw_family_params, family_scene
     from simlidar.in_memory import simulate_in_memory
     from simlidar.sensor import load_sensor
-    from simlidar.world import World
+    from tools.worlds import world_of_scene
 
     scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
-    world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, f"scene:{scene.name}")
+    world = world_of_scene(scene)
     sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
     span = seq.frames * sensor.sweep_period_s
     start = seq.start_s

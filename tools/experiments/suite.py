@@ -115,7 +115,7 @@ def _sensor_model(spec: SequenceSpec):
 
 
 def _build(spec: SequenceSpec):
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.worlds import build_world_and_trajectory
 
     return build_world_and_trajectory(spec.scene, spec.seed, dict(spec.overrides))
 
@@ -164,7 +164,6 @@ def ensure_sequence(spec: SequenceSpec, cache_dir: str | Path, progress: bool = 
             f"{available} sweeps after {spec.start_s:g} s, not {spec.frames}"
         )
     log.info("sequence %s: simulating %d frames into %s", spec.name, spec.frames, folder)
-    info["scene_seed"] = info.pop("seed")
     info.update(command="experiment suite", suite_spec=spec.to_dict(), suite_key=key, noise_std_m=spec.noise_std_m)
     with tqdm(total=spec.frames, unit="sweep", desc=f"simulate {spec.name}", disable=not progress,
               dynamic_ncols=True) as bar:

@@ -121,10 +121,9 @@ def simulate_task(job: SimJob, threads: int | None = None) -> dict:
 def _simulate(job: SimJob, out: Path, threads: int | None) -> None:
     from simlidar.simulate import simulate_sequence
     from simlidar.sweep import SweepSimulator
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.worlds import build_world_and_trajectory
 
     world, trajectory, info = build_world_and_trajectory(job.scene, job.seed, job.scene_overrides)
-    info["scene_seed"] = info.pop("seed")
     available = int((trajectory.duration_s - job.start_s) / job.sensor.sweep_period_s)
     if job.frames > available:
         raise ValueError(f"scene {job.scene}: its path lasts {trajectory.duration_s:.1f} s, room for {available} "

@@ -7,16 +7,9 @@ over ``tools.sweep``: parse, call the library, print.
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
-from tools.argtypes import real_number, whole_number
-
-
-def _command_error(message: str) -> Exception:
-    from tools.cli import CommandError  # late: tools.cli imports this module
-
-    return CommandError(message)
+from .common import CommandError, real_number, run_counter, whole_number
 
 
 def _add_executor_args(p) -> None:
@@ -79,29 +72,6 @@ def add_commands(subparsers) -> None:
 
 
 # ---------------------------------------------------------------- helpers
-def _progress(desc: str):
-    """A run counter on stderr and the two callbacks that drive it (plan, then each result)."""
-    from tqdm import tqdm
-
-    state = {"bar": None, "failed": 0}
-
-    def on_plan(plan) -> None:
-        state["bar"] = tqdm(total=len(plan.runs), initial=plan.skipped, unit="run", desc=desc, dynamic_ncols=True,
-                            file=sys.stderr)
-
-    def on_result(row) -> None:
-        if row["status"] != "ok":
-            state["failed"] += 1
-            state["bar"].set_postfix(failed=state["failed"])
-        state["bar"].update(1)
-
-    def close() -> None:
-        if state["bar"] is not None:
-            state["bar"].close()
-
-    return on_plan, on_result, close
-
-
 def _describe_plan(plan, executor) -> str:
     sequences = len({r.sim_key for r in plan.runs})
     text = (f"{len(plan.runs)} runs over {sequences} sequences: {plan.skipped} done, {len(plan.todo)} to run"
@@ -119,7 +89,7 @@ def _executor(args):
         try:
             import distributed  # noqa: F401
         except ImportError:
-            raise _command_error("--scheduler needs Dask: pip install 'salo-bench[cluster]'") from None
+            raise CommandError("--scheduler needs Dask: pip install 'salo-bench[cluster]'") from None
     return make_executor(args.workers, args.scheduler)
 
 
@@ -127,7 +97,7 @@ def _run(spec, out: Path, args, rerun: bool, desc: str, report: bool = True):
     from tools.sweep import StoreBusy, run_sweep
 
     executor = _executor(args)
-    on_plan, on_result, close = _progress(desc)
+    on_plan, on_result, close = run_counter(desc)
 
     def plan_then_bar(plan) -> None:
         print(f"{desc}: {_describe_plan(plan, executor)}", flush=True)
@@ -138,7 +108,7 @@ def _run(spec, out: Path, args, rerun: bool, desc: str, report: bool = True):
                          on_plan=plan_then_bar, on_result=on_result, command_timeout_s=args.timeout,
                          report=report)
     except StoreBusy as exc:
-        raise _command_error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     finally:
         close()
 
@@ -167,7 +137,7 @@ def cmd_sweep(args) -> int:
             return 0
         result = _run(spec, out, args, args.rerun, f"sweep {spec.name}")
     except SpecError as exc:
-        raise _command_error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     print()
     print(format_markdown(summarize(result.rows)), end="")
     _print_failures(result.rows)
@@ -194,7 +164,7 @@ def cmd_regress(args) -> int:
     )
 
     if args.odometry_command and args.baseline is None:
-        raise _command_error("--odometry-command needs --baseline FILE: your odometry's own baseline "
+        raise CommandError("--odometry-command needs --baseline FILE: your odometry's own baseline "
                              "(write it once with --update)")
     baseline_path = args.baseline or DEFAULT_BASELINE
     try:
@@ -221,7 +191,7 @@ def cmd_regress(args) -> int:
             return 0
         report = compare(rows, baseline, spec, origin=str(baseline_path))
     except (SpecError, BaselineError) as exc:
-        raise _command_error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     _print_figures(rows, baseline, report.tolerance)
     improved = [f for f in report.findings if f.kind == "improved"]
     if improved:
