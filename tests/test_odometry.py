@@ -17,15 +17,15 @@ from simlidar.dataset import open_sequence
 from simlidar.sensor import load_preset
 from simlidar.simulate import simulate_sequence
 from simlidar.sweep import SweepSimulator
-from tools.worlds import build_world_and_trajectory
+from tools.worlds import build_scene_world
 
 SENSOR = load_preset("salo32")  # 2 cm range noise
 
 
 @pytest.fixture(scope="module")
 def city():
-    world, traj, _ = build_world_and_trajectory("city", 0, {})
-    return world, traj
+    built = build_scene_world("city", 0, {})
+    return built.world, built.trajectory
 
 
 def register_pair(a, b, name, init):

@@ -150,9 +150,10 @@ def drives(tmp_path_factory):
     from simlidar.dataset import open_sequence
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
-    from tools.worlds import build_world_and_trajectory
+    from tools.worlds import build_scene_world
 
-    world, path, _ = build_world_and_trajectory("city", 1, {})
+    city = build_scene_world("city", 1, {})
+    world, path = city.world, city.trajectory
     trajectory = YawOscillation(path, math.radians(YAW_AMPLITUDE_DEG), YAW_PERIOD_S)
     root = tmp_path_factory.mktemp("peer_drives")
     out = {}

@@ -14,7 +14,7 @@ import scenes
 from simlidar.world import load_world
 from tools.cli.common import CommandError, parse_overrides
 from tools.cli.scenes import add_commands
-from tools.worlds import build_world_and_trajectory
+from tools.worlds import build_scene_world
 
 SMALL_CITY = ["--set", "streets_x=2", "--set", "streets_y=2", "--set", "route_blocks=1"]
 
@@ -110,7 +110,8 @@ def test_scene_command_errors_name_the_problem(tmp_path):
 
 
 def test_world_and_trajectory_for_the_simulator():
-    world, traj, info = build_world_and_trajectory("tunnel", 3, {"length_m": "200"})
+    built = build_scene_world("tunnel", 3, {"length_m": "200"})
+    world, traj, info = built.world, built.trajectory, built.info
     json.dumps(info)  # goes into the manifest
     assert info["scene"] == "tunnel" and info["scene_seed"] == 3 and info["scene_params"]["length_m"] == 200.0
     again = scenes.build_scene(info["scene"], **info["scene_params"])  # the manifest rebuilds the world
@@ -137,7 +138,8 @@ def test_view_of_a_scene_and_of_a_sequence(tmp_path):
     assert run(["view", "tunnel", "--set", "length_m=150", "--at", "0.3", "--out", str(png)]) == 0
     _png_is_a_picture(png)
 
-    world, traj, info = build_world_and_trajectory("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    built = build_scene_world("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    world, traj, info = built.world, built.trajectory, built.info
     seq = simulate_sequence(world, traj, load_sensor("vlp16"), tmp_path / "seq", frames=2, t_start=5.0, info=info)
     png = tmp_path / "seq.png"
     assert run(["view", str(seq), "--out", str(png)]) == 0
@@ -165,7 +167,8 @@ def test_view_shows_the_frame_asked_for(tmp_path, drawn):
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
 
-    world, traj, info = build_world_and_trajectory("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    built = build_scene_world("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    world, traj, info = built.world, built.trajectory, built.info
     folder = simulate_sequence(world, traj, load_sensor("vlp16"), tmp_path / "seq", frames=5, t_start=5.0,
                                info=info)
     seq = open_sequence(folder)

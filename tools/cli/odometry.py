@@ -38,12 +38,9 @@ def add_commands(sub) -> None:
 
 def cmd_odometry(args) -> int:
     from odometry.config import ConfigError, config_from_dict, load_config, variant
-    from odometry.pipeline import OdometryError, run_sequence, write_diagnostics_csv
+    from odometry.pipeline import OdometryError, degenerate_stretches
     from simlidar.dataset import open_sequence
-    from simlidar.formats.atomic import atomic_write_text
-    from simlidar.formats.kitti import write_kitti_poses
-    from simlidar.formats.tum import write_tum
-    from simlidar.sequence import frame_times
+    from tools.runners import RunFiles, run_method
 
     try:
         config = variant(args.variant)
@@ -58,31 +55,20 @@ def cmd_odometry(args) -> int:
         raise CommandError(str(exc)) from None
     seq = open_sequence(args.sequence, sensor=args.sensor, poses=args.poses, topic=args.topic)
     frames = parse_frames(args.frames)
-    n = frames_selected(len(seq), frames)
     out = args.out or Path("out") / args.sequence.resolve().name / config.name / "poses.txt"
-    bar = progress_bar(n, "frame", f"odometry {config.name}")
+    files = RunFiles.beside(out, tum=args.tum)
+    bar = progress_bar(frames_selected(len(seq), frames), "frame", f"odometry {config.name}")
     try:
-        run = run_sequence(seq, config, frames=frames, on_frame=lambda k, d: bar.update(1))
+        result = run_method(seq, config, frames=frames, on_frame=lambda k, d: bar.update(1), files=files)
     except OdometryError as exc:
         raise CommandError(f"{args.sequence}: {exc}") from None
     finally:
         bar.close()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_kitti_poses(out, run.poses)
-    diagnostics_csv = out.with_name(out.stem + "_diagnostics.csv")
-    write_diagnostics_csv(diagnostics_csv, run.diagnostics)
-    atomic_write_text(out.with_name(out.stem + "_config.yaml"), config.to_yaml())
-    if args.tum:
-        times = run.times_s if run.times_s is not None else frame_times(len(run.poses), seq.sensor)
-        write_tum(out.with_suffix(".tum"), run.poses, times)
-    from odometry.pipeline import degenerate_stretches
-
-    flagged = sum(d.extrapolated for d in run.diagnostics)
-    stretches = degenerate_stretches(run.diagnostics)
-    print(f"{len(run.poses)} frames at {run.frames_per_second:.1f} frames/s -> {out}")
-    if flagged:
-        print(f"  {flagged} frames extrapolated (too few points, singular system or an estimate far from the "
-              f"constant-velocity prediction): see {diagnostics_csv}")
+    stretches = degenerate_stretches(result.run.diagnostics)
+    print(f"{len(result.poses)} frames at {result.frames_per_second:.1f} frames/s -> {out}")
+    if result.flags.extrapolated:
+        print(f"  {result.flags.extrapolated} frames extrapolated (too few points, singular system or an estimate "
+              f"far from the constant-velocity prediction): see {files.diagnostics}")
     if stretches:
         print(f"  weakly constrained (translational eigenvalue per match < {config.degenerate_eigenvalue:g}"
               + (f", or the prior kept below {config.min_constraint_eigenvalue:g}"
@@ -90,5 +76,5 @@ def cmd_odometry(args) -> int:
         for st in stretches[:20]:
             print("    " + st.describe())
         if len(stretches) > 20:
-            print(f"    ... {len(stretches) - 20} more stretches in {diagnostics_csv}")
+            print(f"    ... {len(stretches) - 20} more stretches in {files.diagnostics}")
     return 0

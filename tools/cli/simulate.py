@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 from simlidar.sensor import load_sensor, preset_names
-from simlidar.sequence import DatasetError
 
 from .common import CommandError, parse_overrides, progress_bar, real_number, split_seed, whole_number
 
@@ -92,39 +92,18 @@ def cmd_simulate(args) -> int:
 
 
 def _simulate_mesh(args, sensor) -> int:
-    import numpy as np
+    from simlidar.simulate import simulate_sequence
+    from tools.worlds import load_mesh_world
 
-    from simlidar.formats.atomic import sha256_file
-    from simlidar.formats.kitti import read_kitti_poses, read_times
-    from simlidar.trajectory import SampledTrajectory
-    from simlidar.world import load_world
-
-    world = load_world(args.mesh)
-    poses = read_kitti_poses(args.poses)
-    if args.times is not None:
-        times = read_times(args.times)
-        if len(times) != len(poses):
-            raise DatasetError(f"{args.times}: {len(times)} times for {len(poses)} poses in {args.poses}")
-    else:
-        times = sensor.sweep_period_s * np.arange(len(poses))
-    try:
-        trajectory = SampledTrajectory(times, poses)
-    except ValueError as exc:
-        raise DatasetError(f"{args.times or args.poses}: {exc}") from None
-    fit = _sweeps_covered(times, sensor)
+    built = load_mesh_world(args.mesh, args.poses, args.times, sensor)
+    fit = built.sweeps_covered(sensor)
     frames = args.frames if args.frames is not None else fit
-    info = {
-        "command": "simulate",
-        "mesh": str(args.mesh.resolve()),
-        "mesh_sha256": sha256_file(args.mesh),
-        "poses_file": str(args.poses.resolve()),
-    }
-    if args.times is not None:
-        info["times_file"] = str(args.times.resolve())
-    beyond = _beyond_last_pose(times, sensor, frames)
+    info = {"command": "simulate", **built.info}
+    beyond = built.beyond_last_pose_s(sensor, frames)
     if beyond > 0:
+        times = built.times
         need = times[0] + (frames - 1) * sensor.sweep_period_s
-        numbers = (f"{len(poses)} poses cover {times[-1] - times[0]:.1f} s; "
+        numbers = (f"{len(times)} poses cover {times[-1] - times[0]:.1f} s; "
                    f"{frames} frames need {need - times[0]:.1f} s")
         if not args.extrapolate:
             raise CommandError(f"{args.poses}: {numbers} (at most {fit} frames fit: lower --frames, give more "
@@ -134,83 +113,62 @@ def _simulate_mesh(args, sensor) -> int:
                                 "frames_need_s": round(float(need - times[0]), 9),
                                 "beyond_last_pose_s": round(float(beyond), 9),
                                 "method": "constant velocity of the last pose interval"}
-    return _run_simulation(world, trajectory, sensor, args, frames, info, where=str(args.poses),
-                           t_start=float(times[0]), seed=0 if args.seed is None else args.seed,
-                           strict_inside=True if args.strict_inside_check else None)
-
-
-def _sweeps_covered(times, sensor) -> int:
-    """How many sweeps, one period apart from ``times[0]``, start within the pose times (N,) s."""
-    return int((times[-1] - times[0]) / sensor.sweep_period_s + 1e-9) + 1
-
-
-def _beyond_last_pose(times, sensor, frames: int) -> float:
-    """How far the last sweep's start lies beyond the last pose time, s (0 when the poses cover every frame).
-
-    times: (N,) pose times, s; the first sweep starts at ``times[0]``. The last
-    sweep's own firings run one sweep period past its start; the last pose
-    interval's velocity carries them (as it does with one frame per pose).
-    """
-    need = times[0] + (frames - 1) * sensor.sweep_period_s
-    beyond = float(need - times[-1])
-    return beyond if beyond > 1e-9 * max(1.0, abs(float(times[-1]))) else 0.0
+    with _simulating(frames, str(args.poses)) as on_frame:
+        simulate_sequence(built.world, built.trajectory, sensor, args.out, frames=frames,
+                          seed=0 if args.seed is None else args.seed, t_start=float(built.times[0]),
+                          motion_distortion=args.motion_distortion,
+                          info={**info, "noise_std_m": sensor.range_noise_std_m}, force=args.force,
+                          on_frame=on_frame, strict_inside=True if args.strict_inside_check else None)
+    print(f"wrote {frames} frames to {args.out}")
+    return 0
 
 
 def _simulate_scene(args, sensor) -> int:
-    from tools.worlds import build_world_and_trajectory
+    from tools.runners import simulate_scene
+    from tools.worlds import build_scene_world
 
     try:
         overrides = parse_overrides(args.scene_overrides, args.scene_params)
         seed, overrides = split_seed(overrides, args.seed, args.scene_overrides, args.scene_params)
         if args.speed is not None:
             overrides["speed_m_s"] = args.speed
-        world, trajectory, info = build_world_and_trajectory(args.scene, seed, overrides)
+        scene = build_scene_world(args.scene, seed, overrides)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     start = 0.0 if args.start is None else args.start
-    available = int((trajectory.duration_s - start) / sensor.sweep_period_s)
+    available = scene.sweeps_available(sensor, start)
     frames = args.frames if args.frames is not None else min(available, 100)
     if frames > available:
         raise CommandError(
-            f"scene {args.scene}: its path lasts {trajectory.duration_s:.1f} s, room for {available} sweeps "
+            f"scene {args.scene}: its path lasts {scene.trajectory.duration_s:.1f} s, room for {available} sweeps "
             f"after --start {start:g} s, not {frames} (lower --frames, or raise --speed or the path length)"
         )
-    return _run_simulation(world, trajectory, sensor, args, frames, {**info, "command": "simulate"},
-                           where=f"scene {args.scene}", t_start=start, seed=seed)
+    with _simulating(frames, f"scene {args.scene}") as on_frame:
+        simulate_scene(scene, sensor, args.out, frames, seed=seed, start_s=start,
+                       motion_distortion=args.motion_distortion, info={"command": "simulate"}, force=args.force,
+                       on_frame=on_frame)
+    print(f"wrote {frames} frames to {args.out}")
+    return 0
 
 
-def _run_simulation(world, trajectory, sensor, args, frames, info, where, t_start: float, seed: int,
-                    strict_inside: bool | None = None) -> int:
-    from simlidar.simulate import simulate_sequence
+@contextmanager
+def _simulating(frames: int, where: str):
+    """The ``on_frame`` of a progress bar that starts with the first sweep (after the checks have spoken);
+    a sensor pose inside geometry becomes a one-line error naming ``where``."""
     from simlidar.sweep import SensorInsideGeometry
 
     bar = None
 
-    def advance(k, scan) -> None:  # the bar starts with the first sweep, after the checks have spoken
+    def advance(k, scan) -> None:
         nonlocal bar
         if bar is None:
             bar = progress_bar(frames, "sweep", "simulate")
         bar.update(1)
 
     try:
-        simulate_sequence(
-            world,
-            trajectory,
-            sensor,
-            args.out,
-            frames=frames,
-            seed=seed,
-            t_start=t_start,
-            motion_distortion=args.motion_distortion,
-            info={**info, "noise_std_m": sensor.range_noise_std_m},
-            force=args.force,
-            on_frame=advance,
-            strict_inside=strict_inside,
-        )
+        yield advance
     except SensorInsideGeometry as exc:
         raise CommandError(f"{where}: {exc}") from None
     finally:
         if bar is not None:
             bar.close()
-    print(f"wrote {frames} frames to {args.out}")
-    return 0

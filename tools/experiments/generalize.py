@@ -152,7 +152,7 @@ class MethodRun:
 
 def run_method(method: str, sequence, overrides: dict) -> MethodRun:
     """Run ``method`` over every frame of ``sequence`` (a peer that is missing or fails: ``ok=False``)."""
-    from odometry.pipeline import run_sequence
+    from tools.runners import run_method as run_ours
 
     from . import peer
 
@@ -167,11 +167,10 @@ def run_method(method: str, sequence, overrides: dict) -> MethodRun:
             log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
             return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
         return MethodRun(method, True, f"{method} {peer.peer_version(method)}", run.poses, run.frames_per_second)
-    run = run_sequence(sequence, odometry_config(method, overrides))
-    d = run.diagnostics
-    flags = {"extrapolated": sum(x.extrapolated for x in d), "degenerate": sum(x.degenerate for x in d),
-             "remapped_frames": sum(x.remapped > 0 for x in d)}
-    return MethodRun(method, True, run.config.name, run.poses, run.frames_per_second, flags=flags)
+    ours = run_ours(sequence, odometry_config(method, overrides))
+    flags = {"extrapolated": ours.flags.extrapolated, "degenerate": ours.flags.degenerate,
+             "remapped_frames": ours.flags.remapped}
+    return MethodRun(method, True, ours.run.config.name, ours.poses, ours.frames_per_second, flags=flags)
 
 
 def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:

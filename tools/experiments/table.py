@@ -135,7 +135,7 @@ def run_method(method: str, sequence, params: TableParams, progress: bool) -> Me
     """One method over one sequence (a peer: a "not installed" result when it cannot run here)."""
     from tqdm import tqdm
 
-    from odometry.pipeline import run_sequence
+    from tools.runners import run_method as run_ours
 
     overrides = dict(params.config_overrides)
     desc = f"{METHOD_LABELS[method]} {sequence.path.name}"
@@ -145,11 +145,10 @@ def run_method(method: str, sequence, params: TableParams, progress: bool) -> Me
             if not res.available:
                 return res
         else:
-            run = run_sequence(sequence, odometry_config(method, overrides), on_frame=lambda k, d: bar.update(1))
-            res = MethodResult(method, True, "", run.poses, frames_per_second=run.frames_per_second,
-                               flagged_degenerate=sum(d.degenerate for d in run.diagnostics),
-                               extrapolated=sum(d.extrapolated for d in run.diagnostics))
-            res.diagnostics = run.diagnostics
+            ours = run_ours(sequence, odometry_config(method, overrides), on_frame=lambda k, d: bar.update(1))
+            res = MethodResult(method, True, "", ours.poses, frames_per_second=ours.frames_per_second,
+                               flagged_degenerate=ours.flags.degenerate, extrapolated=ours.flags.extrapolated)
+            res.diagnostics = ours.run.diagnostics
     return score_method(res, sequence, params)
 
 
@@ -235,15 +234,17 @@ def run_table(params: TableParams, cache_dir: str | Path, record: RunRecord | No
     return TableResult(params, results)
 
 
-def _write_method_files(record: RunRecord, seq_name: str, res: MethodResult) -> None:
-    from odometry.pipeline import write_diagnostics_csv
-    from simlidar.formats.kitti import write_kitti_poses
+def write_method_files(record: RunRecord, stem: str, res: MethodResult) -> None:
+    """A method's poses at ``STEM.txt`` of the run folder and, for ours, its diagnostics at ``STEM_diagnostics.csv``."""
+    from tools.runners import RunFiles, write_run_files
 
-    if not res.available:
-        return
-    write_kitti_poses(record.path(f"poses/{seq_name}/{res.method}.txt"), res.poses)
-    if res.diagnostics is not None:
-        write_diagnostics_csv(record.path(f"poses/{seq_name}/{res.method}_diagnostics.csv"), res.diagnostics)
+    diagnostics = record.path(f"{stem}_diagnostics.csv") if res.diagnostics is not None else None
+    write_run_files(RunFiles(record.path(f"{stem}.txt"), diagnostics), res.poses, res.diagnostics)
+
+
+def _write_method_files(record: RunRecord, seq_name: str, res: MethodResult) -> None:
+    if res.available:
+        write_method_files(record, f"poses/{seq_name}/{res.method}", res)
 
 
 # ---------------------------------------------------------------- outputs
