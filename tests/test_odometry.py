@@ -83,6 +83,7 @@ def city_sequence(tmp_path_factory, city):
     return open_sequence(out)
 
 
+@pytest.mark.slow
 def test_sequence_salo_with_deskew_below_one_percent(city_sequence):
     seq = city_sequence
     gt = seq.poses
@@ -100,6 +101,7 @@ def test_sequence_salo_with_deskew_below_one_percent(city_sequence):
     assert 0.03 < np.median(kept) < 0.15
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seq_id, bound_cm", [("05", 2.5), ("01", 7.0)])
 def test_real_kitti_per_frame_error(real_data, seq_id, bound_cm):
     """Real HDL-64E scans. The bounds are 2.5 / 7 cm mean per-frame error; the ground
@@ -158,6 +160,7 @@ def rolling_suburb():
                               fields="real")
 
 
+@pytest.mark.slow
 def test_no_vertical_drift_on_rolling_terrain(rolling_suburb):
     """The cause of the vertical drift of scan-to-scan registration: a normal fitted to points of one ring
     (the usual ground neighbourhood of a 32-ring sensor) is perpendicular to the beams, tilted outward by

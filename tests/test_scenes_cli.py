@@ -130,6 +130,7 @@ def _png_is_a_picture(path, size=(1800, 900)):
         assert len(np.unique(half.reshape(-1, 3), axis=0)) > 50
 
 
+@pytest.mark.slow
 def test_view_of_a_scene_and_of_a_sequence(tmp_path):
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
@@ -162,6 +163,7 @@ def drawn(monkeypatch):
     return calls
 
 
+@pytest.mark.slow
 def test_view_shows_the_frame_asked_for(tmp_path, drawn):
     from simlidar.dataset import open_sequence
     from simlidar.sensor import load_sensor
