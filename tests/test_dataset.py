@@ -117,6 +117,27 @@ def test_unfinished_or_damaged_folders_are_refused(tmp_path):
         open_sequence(tmp_path / "s2")
 
 
+
+def test_open_sequence_asks_the_readers_in_order_and_each_names_its_kind(tmp_path):
+    from simlidar.dataset import READERS
+    from tools.export import export_rosbag, export_scans
+
+    assert [r.name for r in READERS] == ["rosbag2", "salo", "kitti", "scans"]  # the catch-all folder reader last
+    sim = simulate(tmp_path / "sim", frames=2)
+    seq = open_sequence(sim)
+    kitti = tmp_path / "kitti"
+    (kitti / "velodyne").mkdir(parents=True)
+    (kitti / "calib.txt").write_text("Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n")
+    write_bin(kitti / "velodyne" / "000000.bin", np.ones((3, 3)), np.zeros(3))
+    sources = {"salo": sim, "kitti": kitti, "scans": export_scans(seq, tmp_path / "ply", "ply").path,
+               "rosbag2": export_rosbag(seq, tmp_path / "bag").path}
+    for reader in READERS:
+        path = sources[reader.name]
+        first = next(r for r in READERS if r.detect(path))
+        assert first is reader and open_sequence(path).kind == reader.name
+    with pytest.raises(DatasetError, match="not a folder"):
+        open_sequence(tmp_path / "nothing_here")
+
 def test_kitti_camera_to_lidar_hand_made():
     rng = np.random.default_rng(0)
     Tr = se3.exp(np.r_[rng.normal(0, 0.3, 3), rng.normal(0, 1.0, 3)])  # velodyne -> cam0
