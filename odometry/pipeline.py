@@ -22,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from simlidar import se3
-from simlidar.dataset import Frame, Sequence, atomic_write_text, deskew_times, format_kitti_poses
+from simlidar.formats.atomic import atomic_write_text
+from simlidar.formats.scan_folders import Sequence
 from simlidar.sensor import LidarModel
+from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times
 
 from .config import OdometryConfig
 from .deskew import deskew, redeskew
@@ -41,8 +42,6 @@ log = logging.getLogger(__name__)
 
 # The stages timed in the diagnostics, in the order a frame passes them.
 STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject", "estimate", "map")
-# The frame period when neither time stamps nor a sensor give one (10 Hz, the common spin rate), s.
-DEFAULT_FRAME_PERIOD_S = 0.1
 
 
 class OdometryError(ValueError):
@@ -295,7 +294,7 @@ class Odometry:
         return self.diagnostics[-1] if self.diagnostics else None
 
     def register_frame(self, frame: Frame, stamp_s: float | None = None) -> np.ndarray:
-        """``register`` with a ``simlidar.dataset.Frame`` (uses its ring and time fields)."""
+        """``register`` with a ``simlidar.sequence.Frame`` (uses its ring and time fields)."""
         return self.register(frame.points, times_s=frame.time_s, rings=frame.ring, stamp_s=stamp_s)
 
     def register(
@@ -622,26 +621,6 @@ def write_diagnostics_csv(path: str | Path, diagnostics: list[FrameDiagnostics])
     for d in diagnostics:
         w.writerow(diagnostics_row(d))
     atomic_write_text(path, buf.getvalue())
-
-
-def write_kitti_poses(path: str | Path, poses: np.ndarray) -> None:
-    atomic_write_text(path, format_kitti_poses(poses))
-
-
-def format_tum(poses: np.ndarray, times_s: np.ndarray) -> str:
-    """TUM trajectory text: ``timestamp tx ty tz qx qy qz qw`` per line."""
-    q = Rotation.from_matrix(poses[:, :3, :3]).as_quat()  # x y z w
-    rows = np.column_stack([times_s, poses[:, :3, 3], q])
-    return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in rows)
-
-
-def write_tum(path: str | Path, poses: np.ndarray, times_s: np.ndarray) -> None:
-    atomic_write_text(path, format_tum(poses, times_s))
-
-
-def default_times(n: int, sensor: LidarModel | None) -> np.ndarray:
-    period = sensor.sweep_period_s if sensor is not None else DEFAULT_FRAME_PERIOD_S
-    return np.arange(n) * period
 
 
 __all__ = ["Odometry", "OdometryError", "run_sequence"]

@@ -2,7 +2,7 @@
 
 ``simulate_in_memory`` runs the same sweeps as ``simlidar.simulate.simulate_sequence``
 (same simulator, seeds and poses) and keeps the frames in memory as an
-``InMemorySequence``, which reads like ``simlidar.dataset.Sequence``: ``len``,
+``InMemorySequence``, which reads like ``simlidar.formats.scan_folders.Sequence``: ``len``,
 indexing and iteration give ``Frame`` objects, ``poses`` are ``T_first_lidar``,
 ``times`` the sweep starts relative to the first, ``sensor`` the model. For
 suites of many short sequences (the generalisation experiment) this saves
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from . import se3
-from .dataset import Frame
 from .degeneracy import Degeneracy, degeneracy
 from .inside import check_poses
 from .sensor import LidarModel
+from .sequence import Frame
 from .simulate import frame_start_times
 from .sweep import SweepSimulator
 from .trajectory import Trajectory
@@ -43,7 +43,7 @@ _SIMULATED_DTYPE = np.dtype([("ring", "<u2"), ("time_s", "<f4")])
 
 @dataclass
 class InMemorySequence:
-    """Frames of a simulated sequence in memory (reads like ``simlidar.dataset.Sequence``).
+    """Frames of a simulated sequence in memory (reads like ``simlidar.formats.scan_folders.Sequence``).
 
     points: per frame (N_k, 3) float32 measured points, m. fields: per frame a
     structured (N_k,) array (ring, time_s) or None. poses: (F, 4, 4) ``T_first_lidar``.

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import SequenceWriter
+from .formats.salo import SequenceWriter
 from .inside import check_poses
 from .sensor import LidarModel
 from .sweep import Scan, SweepSimulator

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .inside import InsideProbe, SensorInsideGeometry, probe
-from .raycast import Raycaster
+from .raycast import CompactHits, Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
 from .world import World
@@ -96,6 +96,28 @@ class Scan:
         rec["normal"] = self.normal
         rec["object_id"] = self.object_id
         return rec
+
+
+@dataclass
+class CastBlock:
+    """The returns of one block of rays (``SweepSimulator._cast_block``), before they are written into the scan.
+
+    first_ray: index of the block's first ray in the sweep's firing order.
+    hits: the kept returns' ``CompactHits`` (``ray``: (M,) index within the block,
+        ``distance``: (M,) true range, m; face, normal, incidence).
+    ring: (M,) ring of each return. measured: (M,) range with bias and noise, m.
+    dir_local: (B, 3) unit beam directions of the block's rays in the sensor frame.
+    origin_bvh, direction_bvh: (B, 3) ray origins (m) and unit directions in the BVH's frame
+        (the world shifted by ``-Raycaster.offset``), at each ray's firing pose.
+    """
+
+    first_ray: int
+    hits: CompactHits
+    ring: np.ndarray
+    measured: np.ndarray
+    dir_local: np.ndarray
+    origin_bvh: np.ndarray
+    direction_bvh: np.ndarray
 
 
 class SweepSimulator:
@@ -173,7 +195,7 @@ class SweepSimulator:
         blocks = [(k, cols[k] * self.sensor.rings, cols[k + 1] * self.sensor.rings) for k in range(N_BLOCKS)]
         cast = self.raycaster.map(lambda blk: self._cast_block(*blk, T_ref, T_fire, frame_index), blocks)
         # Fill preallocated outputs block by block (no concatenation pass).
-        sizes = [len(c["measured"]) for c in cast]
+        sizes = [len(c.measured) for c in cast]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
         n = int(offsets[-1])
         out = Scan(
@@ -186,8 +208,8 @@ class SweepSimulator:
         self.raycaster.map(lambda job: self._fill_block(job[0], out, job[1], T_ref), jobs)
         return out
 
-    def _cast_block(self, k, a, b, T_ref, T_fire, frame_index) -> dict:
-        """Cast rays a:b of the sweep and draw their noise; returns the block's state."""
+    def _cast_block(self, k, a, b, T_ref, T_fire, frame_index) -> CastBlock:
+        """Cast rays a:b of the sweep (block ``k``) and draw their noise; returns the block's returns."""
         s, rc = self.sensor, self.raycaster
         rng = np.random.default_rng([self.seed, 1, int(frame_index), k])
         dir_local = self._dir_local[a:b]
@@ -198,21 +220,22 @@ class SweepSimulator:
                 s.elevation_rad[ring] + rng.normal(0, jit, b - a),
                 s.column_azimuth_rad(col) + s.ring_azimuth_offset_rad[ring] + rng.normal(0, jit, b - a),
             )
-        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset  # BVH-local frame
+        # Rays are cast in the BVH's frame, the world shifted by -rc.offset (the mesh centred for Embree's float32).
+        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset
         if T_fire is None:
-            d_world = dir_local @ R_ref.T
-            o_world = np.broadcast_to(t_ref, (b - a, 3))
+            d_bvh = dir_local @ R_ref.T
+            o_bvh = np.broadcast_to(t_ref, (b - a, 3))
         elif s.laser_interval_s == 0:
             # One pose per column: rotate each column's beams with one batched matmul.
             c0, c1 = a // s.rings, b // s.rings
             R = T_fire[c0:c1, :3, :3]
-            d_world = np.matmul(dir_local.reshape(c1 - c0, s.rings, 3), R.transpose(0, 2, 1)).reshape(-1, 3)
-            o_world = np.repeat(T_fire[c0:c1, :3, 3] - rc.offset, s.rings, axis=0)
+            d_bvh = np.matmul(dir_local.reshape(c1 - c0, s.rings, 3), R.transpose(0, 2, 1)).reshape(-1, 3)
+            o_bvh = np.repeat(T_fire[c0:c1, :3, 3] - rc.offset, s.rings, axis=0)
         else:
             ti = self._ray_time_idx[a:b]
-            d_world = np.einsum("nij,nj->ni", T_fire[ti, :3, :3], dir_local)
-            o_world = T_fire[ti, :3, 3] - rc.offset
-        hits = rc.cast_compact(o_world, d_world, s.max_range_m + 1.0)
+            d_bvh = np.einsum("nij,nj->ni", T_fire[ti, :3, :3], dir_local)
+            o_bvh = T_fire[ti, :3, 3] - rc.offset
+        hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0)
 
         ring = self.ray_ring[a + hits.ray]
         noise = rng.standard_normal(len(ring)) * s.range_noise_std_m
@@ -222,24 +245,23 @@ class SweepSimulator:
             keep &= rng.random(len(ring)) >= s.dropout_probability
         if not keep.all():
             hits, ring, measured = hits.select(keep), ring[keep], measured[keep]
-        return {"a": a, "hits": hits, "ring": ring, "measured": measured,
-                "dir_local": dir_local, "o_world": o_world, "d_world": d_world}
+        return CastBlock(a, hits, ring, measured, dir_local, o_bvh, d_bvh)
 
-    def _fill_block(self, c: dict, out: Scan, off: int, T_ref: np.ndarray) -> None:
+    def _fill_block(self, c: CastBlock, out: Scan, off: int, T_ref: np.ndarray) -> None:
         """Write one block's returns into rows off:off+m of the preallocated scan."""
         s, rc = self.sensor, self.raycaster
-        hits, measured, ray = c["hits"], c["measured"], c["hits"].ray
+        hits, measured, ray = c.hits, c.measured, c.hits.ray
         sl = slice(off, off + len(ray))
         R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset
-        g = c["a"] + ray
-        np.multiply(measured[:, None], c["dir_local"][ray], out=out.xyz[sl])  # as the sensor reports
-        hit_world = c["o_world"][ray] + hits.distance[:, None] * c["d_world"][ray]
-        np.matmul(hit_world - t_ref, R_ref, out=out.true_xyz[sl])  # world -> reference frame
+        g = c.first_ray + ray
+        np.multiply(measured[:, None], c.dir_local[ray], out=out.xyz[sl])  # as the sensor reports
+        hit_bvh = c.origin_bvh[ray] + hits.distance[:, None] * c.direction_bvh[ray]
+        np.matmul(hit_bvh - t_ref, R_ref, out=out.true_xyz[sl])  # BVH frame -> reference frame
         np.matmul(hits.normal, R_ref, out=out.normal[sl])
         obj = self.world.face_object_id[hits.face]
         falloff = np.minimum(1.0, (s.intensity_range_ref_m / np.maximum(measured, 1e-6)) ** 2)
         out.intensity[sl] = self._reflectance[obj] * np.abs(hits.cos_incidence) * falloff
-        out.ring[sl] = c["ring"]
+        out.ring[sl] = c.ring
         out.azimuth_index[sl] = self.ray_column[g]
         out.time_s[sl] = self.ray_time_s[g]
         out.range_m[sl] = measured

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from simlidar.trajectory import SampledTrajectory
@@ -47,3 +48,13 @@ def constant_velocity(v=(0.0, 0.0, 0.0), yaw_rate=0.0, start=(0.0, 0.0, 0.0), du
     T[:, 1, 0], T[:, 1, 1] = np.sin(yaw), np.cos(yaw)
     T[:, :3, 3] = np.asarray(start) + np.outer(t, v)
     return SampledTrajectory(t, T)
+
+
+# The default scenes the per-scene checks run on in the fast suite (`pytest -m "not slow"`): two cheap
+# ones; the checks of the other scenes are marked slow and run with the full suite.
+FAST_SCENES = ("tunnel", "canyon")
+
+
+def scene_params(names) -> list:
+    """A per-scene parametrisation: ``FAST_SCENES`` as they are, every other scene marked slow."""
+    return [n if n in FAST_SCENES else pytest.param(n, marks=pytest.mark.slow) for n in names]

@@ -10,19 +10,12 @@ import pytest
 from helpers import box_room, constant_velocity
 
 from simlidar import se3
-from simlidar.dataset import (
-    DatasetError,
-    camera_poses_to_lidar,
-    format_kitti_poses,
-    open_sequence,
-    read_bin,
-    read_kitti_poses,
-    remove_stale_partials,
-    sha256_file,
-    write_bin,
-    write_ply_scan,
-)
+from simlidar.dataset import open_sequence
+from simlidar.formats.atomic import remove_stale_partials, sha256_file
+from simlidar.formats.kitti import camera_poses_to_lidar, format_kitti_poses, read_bin, read_kitti_poses, write_bin
+from simlidar.formats.ply import write_ply_scan
 from simlidar.sensor import load_preset
+from simlidar.sequence import DatasetError
 from simlidar.simulate import simulate_sequence
 from simlidar.sweep import SweepSimulator
 from simlidar.world import save_world_ply
@@ -123,6 +116,27 @@ def test_unfinished_or_damaged_folders_are_refused(tmp_path):
     with pytest.raises(DatasetError, match="000001.bin: size .* not a whole number"):
         open_sequence(tmp_path / "s2")
 
+
+
+def test_open_sequence_asks_the_readers_in_order_and_each_names_its_kind(tmp_path):
+    from simlidar.dataset import READERS
+    from tools.export import export_rosbag, export_scans
+
+    assert [r.name for r in READERS] == ["rosbag2", "salo", "kitti", "scans"]  # the catch-all folder reader last
+    sim = simulate(tmp_path / "sim", frames=2)
+    seq = open_sequence(sim)
+    kitti = tmp_path / "kitti"
+    (kitti / "velodyne").mkdir(parents=True)
+    (kitti / "calib.txt").write_text("Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n")
+    write_bin(kitti / "velodyne" / "000000.bin", np.ones((3, 3)), np.zeros(3))
+    sources = {"salo": sim, "kitti": kitti, "scans": export_scans(seq, tmp_path / "ply", "ply").path,
+               "rosbag2": export_rosbag(seq, tmp_path / "bag").path}
+    for reader in READERS:
+        path = sources[reader.name]
+        first = next(r for r in READERS if r.detect(path))
+        assert first is reader and open_sequence(path).kind == reader.name
+    with pytest.raises(DatasetError, match="not a folder"):
+        open_sequence(tmp_path / "nothing_here")
 
 def test_kitti_camera_to_lidar_hand_made():
     rng = np.random.default_rng(0)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 
+@pytest.mark.slow
 def test_demo_prints_the_table_and_writes_the_plots(tmp_path, capsys):
     from matplotlib.image import imread
 

@@ -44,6 +44,7 @@ def _png_ok(path) -> None:
 
 
 # ---------------------------------------------------------------- pieces against constructed truth
+@pytest.mark.slow
 def test_parse_spec_and_cache_key(cache):
     s = parse_spec("city:3:40", noise_std_m=0.01)
     assert (s.scene, s.seed, s.frames, s.noise_std_m, s.name) == ("city", 3, 40, 0.01, "city-3")
@@ -184,6 +185,7 @@ def table_run(cache, results_root):
     return rec.out_dir, result
 
 
+@pytest.mark.slow
 def test_table_files_and_values(table_run):
     out, result = table_run
     for name in ("table.md", "table.csv", "results.json", "summary.md", RUN_FILE):
@@ -218,6 +220,7 @@ def test_table_files_and_values(table_run):
     assert "SALO against BL" in (out / "summary.md").read_text()
 
 
+@pytest.mark.slow
 def test_table_run_reads_back(table_run, tmp_path):
     import shutil
 
@@ -237,6 +240,7 @@ def test_table_run_reads_back(table_run, tmp_path):
     assert json.loads((copy / RUN_FILE).read_text())["status"] == "complete"  # run.json untouched
 
 
+@pytest.mark.slow
 def test_salo_not_worse_than_bl_beyond_noise(table_run):
     """On a small suite, SALO's mean error is not above BL's by more than the noise of the comparison.
 
@@ -278,6 +282,7 @@ def rejector_run(cache, results_root):
     return rec.out_dir, result
 
 
+@pytest.mark.slow
 def test_rejector_study_files_and_values(rejector_run):
     out, result = rejector_run
     for name in ("registrations.csv", "rejection.csv", "pairs.csv", "precision_recall.csv",
@@ -356,6 +361,7 @@ def ncf_run(cache, results_root):
     return rec.out_dir, result
 
 
+@pytest.mark.slow
 def test_ncf_study_files_and_values(ncf_run):
     out, result = ncf_run
     for name in ("calibration.csv", "c_tau.csv", "overview.csv", "results.json", "summary.md"):
@@ -385,6 +391,7 @@ def test_ncf_study_files_and_values(ncf_run):
             assert 0.4 < r["actual_rms_deg"] / r["predicted_rms_deg"] < 2.5, r
 
 
+@pytest.mark.slow
 def test_report_html_and_markdown(table_run, rejector_run, ncf_run, results_root):
     from tools.experiments.report import ReportError, find_runs, write_report
 
@@ -403,7 +410,7 @@ def test_report_html_and_markdown(table_run, rejector_run, ncf_run, results_root
 
 
 def test_cli_commands_parse():
-    from tools import cli_experiment
+    from tools.cli import experiment as cli_experiment
 
     parser = argparse.ArgumentParser(prog="salo")
     cli_experiment.add_commands(parser.add_subparsers(dest="command", required=True))

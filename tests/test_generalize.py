@@ -90,6 +90,7 @@ def test_trajectory_figures_against_a_constructed_error():
     assert trajectory_figures(gt, bad)["diverged"]
 
 
+@pytest.mark.slow
 def test_a_tiny_suite_runs_and_summarises(tmp_path):
     """Two families, one seed, both kinds, 30 frames: every sequence simulates and every method runs."""
     params = GeneralizeParams(split="tuning", seeds=(TUNING_SEEDS[0],), families=("city", "canyon"),

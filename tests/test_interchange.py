@@ -1,4 +1,4 @@
-"""Interchange: ROS 2 bags (written, read by rosbags itself and by simlidar.bag), PLY / PCD scans, TUM for evo.
+"""Interchange: ROS 2 bags (written, read by rosbags itself and by our reader), PLY / PCD scans, TUM for evo.
 
 One small simulated sequence (VLP-16 in a box room, moving and turning) is
 exported and read back; bags in other drivers' layouts (Ouster, Nebula, Hesai,
@@ -20,20 +20,14 @@ from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
 from simlidar import se3
-from simlidar.bag import BagError, PointFieldSpec, cloud_dtype, cloud_records, dtype_fields
-from simlidar.dataset import DatasetError, open_sequence
+from simlidar.dataset import open_sequence
+from simlidar.formats.pcd import read_pcd, write_pcd
+from simlidar.formats.points import point_record
+from simlidar.formats.rosbag import BagError, PointFieldSpec, cloud_dtype, cloud_records, dtype_fields
 from simlidar.sensor import load_preset
+from simlidar.sequence import DatasetError
 from simlidar.simulate import simulate_sequence
-from tools.export import (
-    DEFAULT_EPOCH_S,
-    ExportError,
-    export_rosbag,
-    export_scans,
-    export_tum,
-    point_record,
-    read_pcd,
-    write_pcd,
-)
+from tools.export import DEFAULT_EPOCH_S, ExportError, export_rosbag, export_scans, export_tum
 
 FRAMES = 5
 PC2 = "sensor_msgs/msg/PointCloud2"
@@ -95,7 +89,7 @@ def test_bag_read_by_rosbags(seq, tmp_path, storage):
         assert t == cloud.header.stamp.sec * 10**9 + cloud.header.stamp.nanosec == stamp_ns(seq, k)
         frame = seq[k]
         assert cloud.width == len(frame.points) and cloud.row_step == 58 * cloud.width
-        # decoded here with a hand-written dtype, independent of simlidar.bag
+        # decoded here with a hand-written dtype, independent of simlidar.formats.rosbag
         dt = np.dtype({"names": ["x", "y", "z", "intensity", "ring", "time", "true_x", "object_id"],
                        "formats": ["<f4", "<f4", "<f4", "<f4", "<u2", "<f4", "<f4", "<i4"],
                        "offsets": [0, 4, 8, 12, 16, 18, 30, 54], "itemsize": 58})
@@ -177,7 +171,7 @@ def test_odometry_runs_on_the_bag(seq, bag, tmp_path):
 
 
 def test_salo_odometry_on_an_exported_bag(seq_dir, tmp_path):
-    from tools import cli_export
+    from tools.cli import export as cli_export
     from tools.cli import main as salo
 
     parser = argparse.ArgumentParser()
@@ -401,7 +395,7 @@ def test_bag_errors(seq, bag, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "rosbags.rosbag2", None)
     with pytest.raises(DatasetError, match=r"pip install 'salo-bench\[ros\]'"):
         open_sequence(bag)
-    with pytest.raises(ExportError, match="optional 'rosbags' package"):
+    with pytest.raises(BagError, match="writing ROS 2 bags needs the optional 'rosbags' package"):
         export_rosbag(seq, tmp_path / "no_rosbags")
 
 
@@ -457,7 +451,7 @@ def test_pcd_vector_fields_and_errors(tmp_path):
     (tmp_path / "c.pcd").write_bytes(data.replace(b"DATA ascii", b"DATA binary_compressed"))
     with pytest.raises(DatasetError, match="binary_compressed' is not supported"):
         read_pcd(tmp_path / "c.pcd")
-    with pytest.raises(ExportError, match="'s' has dtype"):
+    with pytest.raises(DatasetError, match="'s' has dtype"):
         write_pcd(tmp_path / "s.pcd", np.zeros(2, dtype=[("x", "<f4"), ("s", "S4")]))
 
 
@@ -498,7 +492,7 @@ def test_laser_id_order_mapped_through_the_sensor(seq, tmp_path, caplog):
     path = write_cloud_bag(tmp_path / "laser.mcap", [rec], [stamp_ns(seq, 0)])
     b = open_sequence(path, sensor=sensor)
     assert b.layout.ring_order == "laser_id" and np.array_equal(b[0].ring, f.ring)
-    with caplog.at_level("WARNING", logger="simlidar.bag"):
+    with caplog.at_level("WARNING", logger="simlidar.formats.rosbag"):
         b = open_sequence(path)  # no sensor: no table to map laser ids, so no ring
     assert b[0].ring is None and "not ordered by elevation" in caplog.text
 

@@ -14,7 +14,8 @@ import pytest
 
 from odometry import metrics as M
 from simlidar import se3
-from simlidar.dataset import DatasetError, format_kitti_poses, read_kitti_poses
+from simlidar.formats.kitti import format_kitti_poses, read_kitti_poses
+from simlidar.sequence import DatasetError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -368,7 +369,7 @@ def test_ate_and_rpe_match_evo(seed):
 
 # ---------------------------------------------------------------- the command
 def run_evaluate(argv):
-    from tools.cli_evaluate import add_commands
+    from tools.cli.evaluate import add_commands
 
     parser = argparse.ArgumentParser(prog="salo")
     add_commands(parser.add_subparsers(dest="command", required=True))
@@ -424,7 +425,7 @@ def test_evaluate_command_names_the_files_when_counts_differ(tmp_path):
 
 def test_metrics_import_no_plotting_or_embree():
     code = (
-        "import sys, odometry.metrics, tools.cli_evaluate; "
+        "import sys, odometry.metrics, tools.cli.evaluate; "
         "bad = [m for m in sys.modules if m.split('.')[0] in ('matplotlib', 'embreex', 'pyvista')]; "
         "sys.exit(str(bad) if bad else 0)"
     )

@@ -17,15 +17,15 @@ from simlidar.dataset import open_sequence
 from simlidar.sensor import load_preset
 from simlidar.simulate import simulate_sequence
 from simlidar.sweep import SweepSimulator
-from tools.cli_scenes import build_world_and_trajectory
+from tools.worlds import build_scene_world
 
 SENSOR = load_preset("salo32")  # 2 cm range noise
 
 
 @pytest.fixture(scope="module")
 def city():
-    world, traj, _ = build_world_and_trajectory("city", 0, {})
-    return world, traj
+    built = build_scene_world("city", 0, {})
+    return built.world, built.trajectory
 
 
 def register_pair(a, b, name, init):
@@ -83,6 +83,7 @@ def city_sequence(tmp_path_factory, city):
     return open_sequence(out)
 
 
+@pytest.mark.slow
 def test_sequence_salo_with_deskew_below_one_percent(city_sequence):
     seq = city_sequence
     gt = seq.poses
@@ -100,6 +101,7 @@ def test_sequence_salo_with_deskew_below_one_percent(city_sequence):
     assert 0.03 < np.median(kept) < 0.15
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seq_id, bound_cm", [("05", 2.5), ("01", 7.0)])
 def test_real_kitti_per_frame_error(real_data, seq_id, bound_cm):
     """Real HDL-64E scans. The bounds are 2.5 / 7 cm mean per-frame error; the ground
@@ -158,6 +160,7 @@ def rolling_suburb():
                               fields="real")
 
 
+@pytest.mark.slow
 def test_no_vertical_drift_on_rolling_terrain(rolling_suburb):
     """The cause of the vertical drift of scan-to-scan registration: a normal fitted to points of one ring
     (the usual ground neighbourhood of a 32-ring sensor) is perpendicular to the beams, tilted outward by

@@ -150,9 +150,10 @@ def drives(tmp_path_factory):
     from simlidar.dataset import open_sequence
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.worlds import build_scene_world
 
-    world, path, _ = build_world_and_trajectory("city", 1, {})
+    city = build_scene_world("city", 1, {})
+    world, path = city.world, city.trajectory
     trajectory = YawOscillation(path, math.radians(YAW_AMPLITUDE_DEG), YAW_PERIOD_S)
     root = tmp_path_factory.mktemp("peer_drives")
     out = {}
@@ -181,6 +182,7 @@ def residual_lag(gt: np.ndarray, est: np.ndarray, skip: int = 3) -> float:
     return float(np.sum(err[k] * rate[k]) / np.sum(rate[k] ** 2))
 
 
+@pytest.mark.slow
 def test_residual_lag_measures_time_offsets(drives):
     gt = drives["times"].poses
     assert residual_lag(gt, gt) == pytest.approx(0.0, abs=1e-9)
@@ -190,6 +192,7 @@ def test_residual_lag_measures_time_offsets(drives):
         assert residual_lag(gt[:-1], se3.inverse(late[0]) @ late) == pytest.approx(tau, abs=0.1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["times", "no-times"])
 @pytest.mark.parametrize("name", list(PEERS))
 def test_peer_poses_belong_to_sweep_starts(drives, name, kind):

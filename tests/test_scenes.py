@@ -13,6 +13,7 @@ import sys
 import numpy as np
 import pytest
 import trimesh
+from helpers import scene_params
 
 import scenes
 from scenes import LABELS, build_scene
@@ -113,7 +114,7 @@ def test_string_overrides_are_converted():
 
 
 # ---------------------------------------------------------------- mesh
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", scene_params(NAMES))
 def test_mesh_is_well_formed_and_within_budget(name):
     s = default_scene(name)
     assert s.vertices.dtype == np.float64 and s.vertices.shape[1] == 3
@@ -131,7 +132,7 @@ def test_face_budget_is_enforced():
         build_scene("city", max_triangles=10_000)
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", scene_params(NAMES))
 def test_surfaces_to_drive_and_walk_on_face_up(name):
     s = default_scene(name)
     tri = s.vertices[s.faces]
@@ -146,7 +147,7 @@ def test_surfaces_to_drive_and_walk_on_face_up(name):
     assert np.mean(nz > 0.5) > 0.9
 
 
-@pytest.mark.parametrize("name", ["city", "tunnel"])
+@pytest.mark.parametrize("name", [pytest.param("city", marks=pytest.mark.slow), "tunnel"])
 def test_same_seed_same_mesh_other_seed_other_mesh(name):
     a = default_scene(name)
     b = build_scene(name, seed=0)
@@ -156,6 +157,7 @@ def test_same_seed_same_mesh_other_seed_other_mesh(name):
     assert build_scene(name, seed=1).mesh_hash() != a.mesh_hash()
 
 
+@pytest.mark.slow
 def test_mesh_hash_is_the_same_in_a_fresh_interpreter():
     # Catches order that depends on the process (set iteration of strings, id()s).
     code = "import scenes; print(scenes.build_scene('open', seed=5).mesh_hash())"
@@ -163,13 +165,13 @@ def test_mesh_hash_is_the_same_in_a_fresh_interpreter():
     assert out.stdout.strip() == build_scene("open", seed=5).mesh_hash()
 
 
-@pytest.mark.parametrize("name", ["highway", "forest"])
+@pytest.mark.parametrize("name", ["highway", pytest.param("forest", marks=pytest.mark.slow)])
 def test_other_scenes_are_deterministic(name):
     assert build_scene(name, seed=3).mesh_hash() == build_scene(name, seed=3).mesh_hash()
 
 
 # ---------------------------------------------------------------- the sensor's clearance
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", scene_params(NAMES))
 def test_sensor_is_never_inside_geometry(name):
     # The simulator's own check at every frame, and the margin: probe rays from the
     # sensor must not see the inside (back) of surfaces. The meshes are wound outward
@@ -207,7 +209,7 @@ BODY_HALF_WIDTH_M = 0.95
 DRIVABLE = ("road", "ground")
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", scene_params(NAMES))
 def test_path_keeps_clear_of_all_geometry(name):
     s = default_scene(name)
     poses = frame_poses(s)
@@ -235,7 +237,7 @@ def ground_ray_fraction(sensor, height_m: float) -> float:
     return float(below.mean())
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", scene_params(NAMES))
 def test_a_scan_returns_a_realistic_point_count(name):
     # At least 90% of the rays that would meet flat ground within range return (slopes
     # and a pitching body move the far rings a little), more where walls catch the rest.

@@ -30,6 +30,7 @@ import functools
 import numpy as np
 import pytest
 import trimesh
+from helpers import scene_params
 
 import scenes
 from scenes import build_scene
@@ -123,7 +124,7 @@ def test_box_intrusions_sees_the_road_only_below_the_floor_and_a_post_at_0_6_m()
 
 
 # ---------------------------------------------------------------- the scenes
-@pytest.mark.parametrize("name", list(scenes.SCENES))
+@pytest.mark.parametrize("name", scene_params(scenes.SCENES))
 def test_default_scene_keeps_the_lidar_clear(name):
     assert_clear_along_the_trajectory(build_scene(name, seed=0))
 
@@ -135,6 +136,7 @@ def test_tunnel_portals_keep_the_lidar_clear_at_any_grade(name, grade):
     assert_clear_along_the_trajectory(build_scene(name, seed=3, grade_pct=grade, **OFF_GRID[name]))
 
 
+@pytest.mark.slow
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", FAMILY_SEEDS)
 @pytest.mark.parametrize("family", FAMILIES)

@@ -12,8 +12,9 @@ import yaml
 
 import scenes
 from simlidar.world import load_world
-from tools.cli import CommandError
-from tools.cli_scenes import add_commands, build_world_and_trajectory, parse_overrides
+from tools.cli.common import CommandError, parse_overrides
+from tools.cli.scenes import add_commands
+from tools.worlds import build_scene_world
 
 SMALL_CITY = ["--set", "streets_x=2", "--set", "streets_y=2", "--set", "route_blocks=1"]
 
@@ -109,9 +110,10 @@ def test_scene_command_errors_name_the_problem(tmp_path):
 
 
 def test_world_and_trajectory_for_the_simulator():
-    world, traj, info = build_world_and_trajectory("tunnel", 3, {"length_m": "200"})
+    built = build_scene_world("tunnel", 3, {"length_m": "200"})
+    world, traj, info = built.world, built.trajectory, built.info
     json.dumps(info)  # goes into the manifest
-    assert info["scene"] == "tunnel" and info["seed"] == 3 and info["scene_params"]["length_m"] == 200.0
+    assert info["scene"] == "tunnel" and info["scene_seed"] == 3 and info["scene_params"]["length_m"] == 200.0
     again = scenes.build_scene(info["scene"], **info["scene_params"])  # the manifest rebuilds the world
     assert again.mesh_hash() == info["mesh_sha256"]
     assert len(world.faces) == again.n_triangles and world.object_labels == again.object_labels
@@ -128,6 +130,7 @@ def _png_is_a_picture(path, size=(1800, 900)):
         assert len(np.unique(half.reshape(-1, 3), axis=0)) > 50
 
 
+@pytest.mark.slow
 def test_view_of_a_scene_and_of_a_sequence(tmp_path):
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
@@ -136,7 +139,8 @@ def test_view_of_a_scene_and_of_a_sequence(tmp_path):
     assert run(["view", "tunnel", "--set", "length_m=150", "--at", "0.3", "--out", str(png)]) == 0
     _png_is_a_picture(png)
 
-    world, traj, info = build_world_and_trajectory("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    built = build_scene_world("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    world, traj, info = built.world, built.trajectory, built.info
     seq = simulate_sequence(world, traj, load_sensor("vlp16"), tmp_path / "seq", frames=2, t_start=5.0, info=info)
     png = tmp_path / "seq.png"
     assert run(["view", str(seq), "--out", str(png)]) == 0
@@ -159,12 +163,14 @@ def drawn(monkeypatch):
     return calls
 
 
+@pytest.mark.slow
 def test_view_shows_the_frame_asked_for(tmp_path, drawn):
     from simlidar.dataset import open_sequence
     from simlidar.sensor import load_sensor
     from simlidar.simulate import simulate_sequence
 
-    world, traj, info = build_world_and_trajectory("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    built = build_scene_world("city", 1, {"streets_x": 2, "streets_y": 2, "route_blocks": 1})
+    world, traj, info = built.world, built.trajectory, built.info
     folder = simulate_sequence(world, traj, load_sensor("vlp16"), tmp_path / "seq", frames=5, t_start=5.0,
                                info=info)
     seq = open_sequence(folder)
@@ -187,7 +193,7 @@ def test_view_shows_the_frame_asked_for(tmp_path, drawn):
 
 
 def test_view_of_a_mesh_sequence_from_another_folder(tmp_path, monkeypatch, capsys, drawn):
-    from simlidar.dataset import format_kitti_poses
+    from simlidar.formats.kitti import format_kitti_poses
     from simlidar.world import World, save_world_ply
     from tools.cli import main as salo
 

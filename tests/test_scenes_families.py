@@ -74,6 +74,7 @@ def test_same_seed_same_world_other_seed_other_world(name, small):
     assert build_scene(name, seed=5, **small).mesh_hash() != a.mesh_hash()
 
 
+@pytest.mark.slow
 def test_hashes_and_draws_are_the_same_in_a_fresh_interpreter():
     # Catches anything that depends on the process: set order, Python's salted str hash.
     code = ("import scenes; from scenes.families import draw_family_params as d; "
@@ -356,6 +357,7 @@ def test_draws_are_clipped_to_the_parameter_bounds(monkeypatch):
     assert {d["rocks"] for d in draws} == {0} and all(type(d["rocks"]) is int for d in draws)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", FAMILIES)
 def test_every_draw_builds_a_world_for_a_250_frame_sequence(name):
     for seed in range(20):

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from odometry.metrics import evaluate_trajectory
-from simlidar.dataset import read_kitti_poses
+from simlidar.formats.kitti import read_kitti_poses
 from tools import cli
 from tools.sweep import (
     DaskExecutor,
@@ -128,6 +128,7 @@ def test_run_keys_are_stable_hashes_of_resolved_parameters():
 
 
 # ---------------------------------------------------------------- a tiny sweep
+@pytest.mark.slow
 def test_tiny_sweep_writes_table_summary_and_plots(tiny_sweep):
     out, result = tiny_sweep
     assert result.executed == 4 and not result.failures
@@ -154,6 +155,7 @@ def test_tiny_sweep_writes_table_summary_and_plots(tiny_sweep):
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
 
+@pytest.mark.slow
 def test_resume_skips_finished_runs_and_redoes_a_half_written_one(tiny_sweep, tmp_path):
     src, first = tiny_sweep
     out = tmp_path / "copy"
@@ -178,6 +180,7 @@ def test_resume_skips_finished_runs_and_redoes_a_half_written_one(tiny_sweep, tm
     assert store.state(victim) == "ok"
 
 
+@pytest.mark.slow
 def test_a_failed_run_is_recorded_and_the_others_complete(tmp_path):
     spec = spec_from_dict({**TINY, "noise_std_m": [0.01], "variants": ["bl", "broken"],
                            "commands": {"broken": "echo cannot read {sequence} >&2; exit 3 # {out}"}})
@@ -197,6 +200,7 @@ def test_a_failed_run_is_recorded_and_the_others_complete(tmp_path):
     assert len(plan_sweep(too_long, Store(tmp_path / "t"), retry_failed=False).todo) == 0
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_rows_as_local_processes(tiny_sweep, tmp_path):
     distributed = pytest.importorskip("distributed")
     _, local = tiny_sweep  # two local worker processes
@@ -217,6 +221,7 @@ def _regress(capsys, *args) -> tuple[int, str]:
     return code, out.out + out.err
 
 
+@pytest.mark.slow
 def test_regress_passes_against_its_own_baseline_and_fails_when_an_error_grows(tmp_path, capsys):
     suite, baseline = tmp_path / "suite.yaml", tmp_path / "baseline.json"
     suite.write_text(yaml.safe_dump(SUITE))
@@ -246,6 +251,7 @@ def test_regress_passes_against_its_own_baseline_and_fails_when_an_error_grows(t
     assert code == 2 and "another suite" in text
 
 
+@pytest.mark.slow
 def test_regress_evaluates_an_external_odometry_command(tmp_path, capsys):
     script = tmp_path / "fake_odometry.py"
     script.write_text(textwrap.dedent("""

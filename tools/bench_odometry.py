@@ -26,7 +26,7 @@ import numpy as np
 from odometry.config import DEFAULT_VARIANT, variant
 from odometry.metrics import evaluate_trajectory
 from odometry.pipeline import STAGES, Odometry
-from simlidar.dataset import deskew_times
+from simlidar.sequence import deskew_times
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
 
 OURS = ("bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
@@ -38,10 +38,10 @@ def simulate(scene: str, sensor: str, frames: int, seed: int = 0, start_s: float
     from scenes import build_scene
     from simlidar.in_memory import simulate_in_memory
     from simlidar.sensor import load_sensor
-    from simlidar.world import World
+    from tools.worlds import world_of_scene
 
     s = build_scene(scene, seed=seed)
-    world = World(s.vertices, s.faces, s.face_object_id, s.object_labels, f"scene:{scene}")
+    world = world_of_scene(s, f"scene:{scene}")
     return simulate_in_memory(world, s.trajectory, load_sensor(sensor), frames, seed=seed, t_start=start_s,
                               name=f"{scene}-{sensor}")
 

@@ -19,7 +19,7 @@ import numpy as np
 import scenes
 from simlidar.sensor import load_sensor
 from simlidar.sweep import SweepSimulator
-from simlidar.world import World
+from tools.worlds import world_of_scene
 
 
 def bench_scene(name: str, sensor_name: str, sweeps: int, repeat: int, seed: int) -> dict:
@@ -28,7 +28,7 @@ def bench_scene(name: str, sensor_name: str, sweeps: int, repeat: int, seed: int
         t = time.perf_counter()
         scene = scenes.build_scene(name, seed=seed)
         builds.append(time.perf_counter() - t)
-    world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, name)
+    world = world_of_scene(scene, name)
     sensor = load_sensor(sensor_name)
     t = time.perf_counter()
     sim = SweepSimulator(world, sensor, seed=seed)

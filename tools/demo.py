@@ -78,12 +78,12 @@ def demo_table(rows: list[dict]) -> str:
 def run_demo(out_dir: str | Path = "out/demo", frames: int = DEMO_FRAMES, progress: bool = True) -> dict:
     """Simulate, run BL / NCF / SALO, print the table, write the plots; returns the results.json content."""
     from odometry.metrics import trajectory_distances
-    from odometry.pipeline import write_diagnostics_csv, write_kitti_poses
     from simlidar.dataset import open_sequence
+    from simlidar.formats.kitti import write_kitti_poses
     from tools.experiments import plots
     from tools.experiments.records import RunRecord, write_json
     from tools.experiments.suite import SequenceSpec, ensure_sequence
-    from tools.experiments.table import METHOD_LABELS, TableParams, run_method
+    from tools.experiments.table import METHOD_LABELS, TableParams, run_method, write_method_files
 
     out = Path(out_dir)
     spec = SequenceSpec(DEMO_SCENE, DEMO_SEED, frames=frames, start_s=DEMO_START_S)
@@ -97,8 +97,7 @@ def run_demo(out_dir: str | Path = "out/demo", frames: int = DEMO_FRAMES, progre
     results = {}
     for m in DEMO_METHODS:
         results[m] = run_method(m, seq, params, progress)
-        write_kitti_poses(record.path(f"poses/{m}.txt"), results[m].poses)
-        write_diagnostics_csv(record.path(f"poses/{m}_diagnostics.csv"), results[m].diagnostics)
+        write_method_files(record, f"poses/{m}", results[m])
     write_kitti_poses(record.path("poses/gt.txt"), gt)
 
     rows = demo_rows(gt, results)

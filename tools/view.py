@@ -1,11 +1,15 @@
 """Off-screen pictures of a scene: a 3D view with the path and one scan, and a top-down overview.
 
-Used by ``salo view``. pyvista renders with ``off_screen=True`` (no display needed).
+The library of ``salo view``: ``scene_view`` (one scan simulated along a scene's
+path) or ``sequence_view`` (one frame of a simulated sequence in the world it
+was simulated in) gather what to draw, a ``View``; ``draw_view`` renders it.
+pyvista renders with ``off_screen=True`` (no display needed).
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -126,3 +130,137 @@ def render_scene(
     pl.close()
     log.info("wrote %s", out_png)
     return out_png
+
+
+# ---------------------------------------------------------------- what to draw
+class ViewError(ValueError):
+    """A view cannot be made from what was given; the message says why."""
+
+
+@dataclass
+class View:
+    """One picture's content: the world, its path, one scan and its pose, a title.
+
+    vertices: (V, 3) m; faces: (F, 3); labels: (F,) label per triangle; path: (M, 3) m;
+    T: (4, 4) ``T_world_lidar`` of the scan; xyz: (N, 3) scan points in the world frame, m;
+    ring: (N,) ring per point.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    labels: np.ndarray
+    path: np.ndarray
+    T: np.ndarray
+    xyz: np.ndarray
+    ring: np.ndarray
+    title: str
+
+
+def draw_view(view: View, out_png: str | Path) -> Path:
+    """Render a ``View`` to a PNG (``render_scene``)."""
+    return render_scene(view.vertices, view.faces, view.labels, view.path, out_png, view.T, view.xyz, view.ring,
+                        title=view.title)
+
+
+def scene_view(scene, sensor, at: float = 0.5) -> View:
+    """One scan of ``sensor`` simulated along a built scene's trajectory, at the fraction ``at`` of it."""
+    from simlidar.sweep import SweepSimulator
+
+    from .worlds import world_of_scene
+
+    traj = scene.trajectory
+    t0 = float(at * max(traj.duration_s - sensor.sweep_period_s, 0.0))
+    scan = SweepSimulator(world_of_scene(scene, scene.name), sensor, seed=scene.params["seed"]).sweep(traj, t0)
+    T = traj.pose_at(np.array([t0]))[0]
+    return View(scene.vertices, scene.faces, scene.label_of_face(), scene.path, T,
+                scan.xyz @ T[:3, :3].T + T[:3, 3], scan.ring,
+                f"{scene.name} seed {scene.params['seed']}: {sensor.name} scan at t = {t0:.1f} s ({len(scan)} points)")
+
+
+def pick_frame(n: int, times: np.ndarray | None, at: float | None, frame: int | None, name: str = "") -> int:
+    """The frame of an ``n``-frame sequence to show: ``frame``, else the one whose start time
+    (``times``, (n,) s) is nearest the fraction ``at`` of the duration, else 0.
+
+    Raises ValueError for a frame out of range.
+    """
+    if frame is not None:
+        if frame >= n:
+            raise ValueError(f"--frame {frame}: {name or 'the sequence'} has {n} frames (0..{n - 1})")
+        return int(frame)
+    if at is None:
+        return 0
+    if times is None or n < 2:
+        return int(round(at * (n - 1)))
+    target = times[0] + at * (times[-1] - times[0])
+    return int(np.argmin(np.abs(np.asarray(times) - target)))
+
+
+def sequence_view(folder: Path, at: float | None = None, frame_index: int | None = None) -> View:
+    """World, path, world pose and points of one frame of a simulated sequence folder.
+
+    The frame's world pose is the manifest's ``T_world_first_lidar`` times its
+    ``poses.txt`` line. A mesh world is read from the manifest's path and checked
+    against its sha256, so a moved or changed file is reported, not drawn.
+    Raises ViewError (nothing to draw, a frame out of range, a scene that no
+    longer builds) or DatasetError (missing pose, missing or changed mesh).
+    """
+    import scenes
+    from simlidar.dataset import open_sequence
+    from simlidar.formats.atomic import sha256_file
+    from simlidar.sequence import DatasetError
+    from simlidar.world import load_world
+
+    seq = open_sequence(folder)
+    manifest = seq.manifest
+    where = folder / "manifest.json"
+    if not (manifest.get("scene") or manifest.get("mesh")):
+        raise ViewError(f"{where if manifest else folder}: names neither a scene nor a mesh to draw")
+    try:
+        k = pick_frame(len(seq), seq.times, at, frame_index, str(folder))
+    except ValueError as exc:
+        raise ViewError(str(exc)) from None
+    frame = seq[k]
+    ring = frame.ring if frame.ring is not None else np.zeros(len(frame.points), dtype=int)
+    first = manifest.get("T_world_first_lidar")
+    if first is None or len(first) != 12:
+        raise DatasetError(f"{where}: no T_world_first_lidar (12 numbers) to place the frames in the world")
+    T_first = np.eye(4)
+    T_first[:3, :4] = np.reshape(np.asarray(first, dtype=float), (3, 4))
+    T = T_first @ seq.poses[k]
+    path = (T_first @ seq.poses)[:, :3, 3]
+    t_k = float(seq.times[k]) if seq.times is not None else 0.0
+    what = f"frame {k} of {len(seq)} at t = {t_k:.1f} s ({len(frame.points)} points)"
+    if manifest.get("scene"):
+        params = dict(manifest.get("scene_params") or {})
+        # the resolved parameters hold the scene's seed; a top-level "seed" may be the noise's
+        seed = int(params.pop("seed", manifest.get("seed", 0)))
+        try:
+            scene = scenes.build_scene(manifest["scene"], seed=seed, **params)
+        except ValueError as exc:
+            raise ViewError(f"{where}: {exc}") from None
+        if manifest.get("mesh_sha256") and scene.mesh_hash() != manifest["mesh_sha256"]:
+            log.warning("%s: scene %s seed %d builds a different mesh now than when it was simulated "
+                        "(mesh sha256 differs): the picture may not match the scan", where, scene.name, seed)
+        vertices, faces, labels, path = scene.vertices, scene.faces, scene.label_of_face(), scene.path
+        title = f"{folder.name}: scene {scene.name} seed {seed}, {what}"
+    else:
+        mesh = Path(manifest["mesh"])
+        if not mesh.is_file():
+            raise DatasetError(f"{where}: the world mesh {mesh} is missing (moved or deleted since the simulation)")
+        digest = manifest.get("mesh_sha256")
+        if digest:
+            now = sha256_file(mesh)
+            if now != digest:
+                raise DatasetError(f"{mesh}: the mesh changed since {folder} was simulated (sha256 {now[:12]}... "
+                                   f"differs from the manifest's {digest[:12]}...): the picture would show "
+                                   "another world")
+        else:
+            log.warning("%s: no mesh_sha256 (an older sequence): %s is drawn unchecked", where, mesh)
+        world = load_world(mesh)
+        vertices, faces = world.vertices, world.faces
+        labels = np.asarray(world.object_labels, dtype=object)[world.face_object_id]
+        title = f"{folder.name}: mesh {mesh.name}, {what}"
+    return View(vertices, faces, labels, path, T, frame.points @ T[:3, :3].T + T[:3, 3], ring, title)
+
+
+__all__ = ["View", "ViewError", "draw_view", "pick_frame", "render_scene", "scene_view", "sequence_view"]

@@ -15,5 +15,5 @@ One module per idea:
 - ``report``:        one HTML or Markdown page from a results folder.
 
 Library code logs and shows optional progress bars; the commands
-(``tools.cli_experiment``) and ``tools.demo`` print.
+(``tools.cli.experiment``) and ``tools.demo`` print.
 """

@@ -116,10 +116,10 @@ def simulate(seq: SuiteSequence, progress=None):
     from scenes.families import draw_family_params, family_scene
     from simlidar.in_memory import simulate_in_memory
     from simlidar.sensor import load_sensor
-    from simlidar.world import World
+    from tools.worlds import world_of_scene
 
     scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
-    world = World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels, f"scene:{scene.name}")
+    world = world_of_scene(scene)
     sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
     span = seq.frames * sensor.sweep_period_s
     start = seq.start_s
@@ -157,7 +157,7 @@ class MethodRun:
 
 def run_method(method: str, sequence, overrides: dict) -> MethodRun:
     """Run ``method`` over every frame of ``sequence`` (a peer that is missing or fails: ``ok=False``)."""
-    from odometry.pipeline import run_sequence
+    from tools.runners import run_method as run_ours
 
     from . import peer
 
@@ -172,11 +172,10 @@ def run_method(method: str, sequence, overrides: dict) -> MethodRun:
             log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
             return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
         return MethodRun(method, True, f"{method} {peer.peer_version(method)}", run.poses, run.frames_per_second)
-    run = run_sequence(sequence, odometry_config(method, overrides))
-    d = run.diagnostics
-    flags = {"extrapolated": sum(x.extrapolated for x in d), "degenerate": sum(x.degenerate for x in d),
-             "remapped_frames": sum(x.remapped > 0 for x in d)}
-    return MethodRun(method, True, run.config.name, run.poses, run.frames_per_second, flags=flags)
+    ours = run_ours(sequence, odometry_config(method, overrides))
+    flags = {"extrapolated": ours.flags.extrapolated, "degenerate": ours.flags.degenerate,
+             "remapped_frames": ours.flags.remapped}
+    return MethodRun(method, True, ours.run.config.name, ours.poses, ours.frames_per_second, flags=flags)
 
 
 def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
@@ -304,7 +303,7 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
 
 
 def _write_poses(record: RunRecord, res: dict) -> None:
-    from odometry.pipeline import write_kitti_poses
+    from simlidar.formats.kitti import write_kitti_poses
 
     if "gt" in res:
         write_kitti_poses(record.path(f"poses/{res['name']}/gt.txt"), res["gt"])

@@ -68,7 +68,7 @@ from importlib.metadata import PackageNotFoundError, version
 import numpy as np
 
 from simlidar import se3
-from simlidar.dataset import deskew_times
+from simlidar.sequence import deskew_times
 
 log = logging.getLogger(__name__)
 
@@ -170,7 +170,7 @@ def range_limits(min_range_m: float, max_range_m: float) -> tuple[float, float]:
 
 # ---------------------------------------------------------------- the pose-instant convention
 def scan_times(sequence, frame) -> np.ndarray | None:
-    """A frame's per-point times for de-skewing (``simlidar.dataset.deskew_times``)."""
+    """A frame's per-point times for de-skewing (``simlidar.sequence.deskew_times``)."""
     return deskew_times(sequence, frame)
 
 

@@ -56,7 +56,7 @@ def sweep_fractions(times_s: np.ndarray, sweep_period_s: float | None) -> np.nda
 def run_genz_icp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_MAX_RANGE_M,
                  preset: str | None = DEFAULT_PRESET, deskew: bool = True,
                  frames: slice | None = None, on_frame=None) -> PeerRun:
-    """Run GenZ-ICP over (a slice of) a ``simlidar.dataset.Sequence``.
+    """Run GenZ-ICP over (a slice of) a sequence (``simlidar.sequence``).
 
     Args:
         sequence: frames with points and, for distorted scans, per-point ``time_s``;

@@ -26,7 +26,7 @@ KISS_DESKEW_INSTANT = 1.0
 
 def run_kiss_icp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_MAX_RANGE_M,
                  frames: slice | None = None, on_frame=None) -> PeerRun:
-    """Run KISS-ICP over (a slice of) a ``simlidar.dataset.Sequence``.
+    """Run KISS-ICP over (a slice of) a sequence (``simlidar.sequence``).
 
     Args:
         sequence: frames with points and, for distorted scans, per-point ``time_s``.

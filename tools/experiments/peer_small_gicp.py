@@ -56,7 +56,7 @@ class SmallGicpConfig:
 
 def run_small_gicp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_MAX_RANGE_M,
                    config: SmallGicpConfig | None = None, frames: slice | None = None, on_frame=None) -> PeerRun:
-    """Run the small_gicp scan-to-map pipeline over (a slice of) a ``simlidar.dataset.Sequence``.
+    """Run the small_gicp scan-to-map pipeline over (a slice of) a sequence (``simlidar.sequence``).
 
     Args:
         sequence: frames with points (per-point times only decide the pose instant).

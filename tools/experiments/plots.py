@@ -30,7 +30,7 @@ LOG_FLOOR_M = 1e-4
 
 def save_png(fig, path: str | Path, dpi: int = 110) -> Path:
     """Render ``fig`` to PNG in memory and write it atomically (a reader never sees half a file)."""
-    from simlidar.dataset import atomic_write_bytes
+    from simlidar.formats.atomic import atomic_write_bytes
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")  # never crop a legend or a label
@@ -42,7 +42,7 @@ def save_png(fig, path: str | Path, dpi: int = 110) -> Path:
 
 def _level(level: dict) -> str:
     """The rejector study's label of a perturbation level (its results are keyed by it)."""
-    from .rejector_study import level_label
+    from .levels import level_label
 
     return level_label((level["l_r_deg"], level["l_t_m"]))
 
@@ -309,7 +309,7 @@ def rejector_precision_recall(path, pr_summary: list[dict], params: dict) -> Pat
     against a map, no plane match within the bound at the first iteration), the recall
     panel also shows GCR's recall over the candidates it judges (thin line, triangles).
     """
-    from .rejector_study import bounded_recall
+    from .levels import bounded_recall
 
     cats = ["true pose"] + [_level(lv) for lv in params["levels"]]
     fig = _figure(figsize=(max(8.0, 1.5 * len(cats) + 3), 7.0))

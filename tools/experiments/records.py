@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 
 RUN_FILE = "run.json"
 SUMMARY_FILE = "summary.md"

@@ -90,6 +90,7 @@ import numpy as np
 
 from simlidar import se3
 
+from .levels import bounded_recall, level_label
 from .map_target import MapFrame, build_map_target
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
 from .suite import SequenceSpec, ensure_sequence, table_suite
@@ -145,10 +146,6 @@ class RejectorStudyParams:
             "config_overrides": dict(self.config_overrides),
             "map_frames": self.map_frames,
         }
-
-
-def level_label(level: tuple[float, float]) -> str:
-    return f"{level[0]:g} deg / {level[1]:g} m"
 
 
 # ---------------------------------------------------------------- noise
@@ -583,14 +580,6 @@ def summarize_rejection(rej: list[dict]) -> list[dict]:
 def _median_of(rows: list[dict], key: str) -> float | None:
     values = [r[key] for r in rows if r.get(key) is not None]
     return float(np.median(values)) if values else None
-
-
-def bounded_recall(gcr: dict, unbounded: dict | None) -> float | None:
-    """GCR's recall over the true candidates whose source has a finite threshold (those it judges)."""
-    if unbounded is None:
-        return None
-    judged = gcr["true"] - unbounded["kept_true"]
-    return (gcr["kept_true"] - unbounded["kept_true"]) / judged if judged > 0 else None
 
 
 def _binned(d: np.ndarray, thr: np.ndarray, sel: np.ndarray) -> dict:

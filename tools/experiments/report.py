@@ -195,7 +195,7 @@ def report_html(results_dir: str | Path, out_file: str | Path) -> str:
 
 def write_report(results_dir: str | Path, out_file: str | Path, fmt: str = "html") -> Path:
     """Write the page (``fmt`` "html" or "md") and return its path."""
-    from simlidar.dataset import atomic_write_text
+    from simlidar.formats.atomic import atomic_write_text
 
     out = Path(out_file)
     out.parent.mkdir(parents=True, exist_ok=True)

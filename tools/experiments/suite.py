@@ -115,9 +115,9 @@ def _sensor_model(spec: SequenceSpec):
 
 
 def _build(spec: SequenceSpec):
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.worlds import build_scene_world
 
-    return build_world_and_trajectory(spec.scene, spec.seed, dict(spec.overrides))
+    return build_scene_world(spec.scene, spec.seed, dict(spec.overrides))
 
 
 def spec_key(spec: SequenceSpec, mesh_sha256: str) -> str:
@@ -130,7 +130,8 @@ def spec_key(spec: SequenceSpec, mesh_sha256: str) -> str:
 
 
 def _complete(folder: Path, frames: int) -> bool:
-    from simlidar.dataset import DatasetError, open_sequence
+    from simlidar.dataset import open_sequence
+    from simlidar.sequence import DatasetError
 
     if not (folder / "manifest.json").is_file():
         return False
@@ -147,26 +148,22 @@ def ensure_sequence(spec: SequenceSpec, cache_dir: str | Path, progress: bool = 
     """
     from tqdm import tqdm
 
-    from simlidar.simulate import simulate_sequence
+    from tools.runners import PathTooShort, simulate_scene
 
-    world, trajectory, info = _build(spec)
-    key = spec_key(spec, info["mesh_sha256"])
+    scene = _build(spec)
+    key = spec_key(spec, scene.info["mesh_sha256"])
     folder = Path(cache_dir) / f"{spec.name}-{key}"
     if _complete(folder, spec.frames):
         log.info("sequence %s: cached in %s", spec.name, folder)
         return folder
-    sensor = _sensor_model(spec)
-    available = int((trajectory.duration_s - spec.start_s) / sensor.sweep_period_s)
-    if spec.frames > available:
-        raise ValueError(
-            f"sequence {spec.name}: the {spec.scene} path lasts {trajectory.duration_s:.1f} s, room for "
-            f"{available} sweeps after {spec.start_s:g} s, not {spec.frames}"
-        )
     log.info("sequence %s: simulating %d frames into %s", spec.name, spec.frames, folder)
-    info["scene_seed"] = info.pop("seed")
-    info.update(command="experiment suite", suite_spec=spec.to_dict(), suite_key=key, noise_std_m=spec.noise_std_m)
     with tqdm(total=spec.frames, unit="sweep", desc=f"simulate {spec.name}", disable=not progress,
               dynamic_ncols=True) as bar:
-        simulate_sequence(world, trajectory, sensor, folder, frames=spec.frames, seed=spec.seed,
-                          t_start=spec.start_s, info=info, force=True, on_frame=lambda k, scan: bar.update(1))
+        try:
+            simulate_scene(scene, _sensor_model(spec), folder, spec.frames, seed=spec.seed, start_s=spec.start_s,
+                           force=True, on_frame=lambda k, scan: bar.update(1),
+                           info={"command": "experiment suite", "suite_spec": spec.to_dict(), "suite_key": key})
+        except PathTooShort as exc:
+            raise ValueError(f"sequence {spec.name}: the {spec.scene} path lasts {exc.duration_s:.1f} s, room for "
+                             f"{exc.available} sweeps after {exc.start_s:g} s, not {exc.frames}") from None
     return folder

@@ -135,7 +135,7 @@ def run_method(method: str, sequence, params: TableParams, progress: bool) -> Me
     """One method over one sequence (a peer: a "not installed" result when it cannot run here)."""
     from tqdm import tqdm
 
-    from odometry.pipeline import run_sequence
+    from tools.runners import run_method as run_ours
 
     overrides = dict(params.config_overrides)
     desc = f"{METHOD_LABELS[method]} {sequence.path.name}"
@@ -145,11 +145,10 @@ def run_method(method: str, sequence, params: TableParams, progress: bool) -> Me
             if not res.available:
                 return res
         else:
-            run = run_sequence(sequence, odometry_config(method, overrides), on_frame=lambda k, d: bar.update(1))
-            res = MethodResult(method, True, "", run.poses, frames_per_second=run.frames_per_second,
-                               flagged_degenerate=sum(d.degenerate for d in run.diagnostics),
-                               extrapolated=sum(d.extrapolated for d in run.diagnostics))
-            res.diagnostics = run.diagnostics
+            ours = run_ours(sequence, odometry_config(method, overrides), on_frame=lambda k, d: bar.update(1))
+            res = MethodResult(method, True, "", ours.poses, frames_per_second=ours.frames_per_second,
+                               flagged_degenerate=ours.flags.degenerate, extrapolated=ours.flags.extrapolated)
+            res.diagnostics = ours.run.diagnostics
     return score_method(res, sequence, params)
 
 
@@ -229,20 +228,23 @@ def run_table(params: TableParams, cache_dir: str | Path, record: RunRecord | No
                 _write_method_files(record, spec.name, methods[m])
         results.append(SequenceResult(spec, folder, seq.poses, degeneracy_summary(folder), methods))
         if record is not None:
-            from odometry.pipeline import write_kitti_poses
+            from simlidar.formats.kitti import write_kitti_poses
 
             write_kitti_poses(record.path(f"poses/{spec.name}/gt.txt"), seq.poses)
     return TableResult(params, results)
 
 
-def _write_method_files(record: RunRecord, seq_name: str, res: MethodResult) -> None:
-    from odometry.pipeline import write_diagnostics_csv, write_kitti_poses
+def write_method_files(record: RunRecord, stem: str, res: MethodResult) -> None:
+    """A method's poses at ``STEM.txt`` of the run folder and, for ours, its diagnostics at ``STEM_diagnostics.csv``."""
+    from tools.runners import RunFiles, write_run_files
 
-    if not res.available:
-        return
-    write_kitti_poses(record.path(f"poses/{seq_name}/{res.method}.txt"), res.poses)
-    if res.diagnostics is not None:
-        write_diagnostics_csv(record.path(f"poses/{seq_name}/{res.method}_diagnostics.csv"), res.diagnostics)
+    diagnostics = record.path(f"{stem}_diagnostics.csv") if res.diagnostics is not None else None
+    write_run_files(RunFiles(record.path(f"{stem}.txt"), diagnostics), res.poses, res.diagnostics)
+
+
+def _write_method_files(record: RunRecord, seq_name: str, res: MethodResult) -> None:
+    if res.available:
+        write_method_files(record, f"poses/{seq_name}/{res.method}", res)
 
 
 # ---------------------------------------------------------------- outputs
@@ -435,7 +437,7 @@ def load_table_result(run_dir: str | Path) -> TableResult:
     """
     import json
 
-    from simlidar.dataset import read_kitti_poses
+    from simlidar.formats.kitti import read_kitti_poses
 
     run = Path(run_dir)
     res = json.loads((run / "results.json").read_text())

@@ -42,8 +42,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from odometry.config import DEFAULT_VARIANT
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 
+from .runner import SweepResult, run_sweep
 from .spec import SweepSpec, spec_from_dict
 
 # Short sequences (130 sweeps from 7 s on, at 10 m/s: ~130 m, so 100 m segments exist where the path
@@ -250,3 +251,39 @@ def compare(rows: list[dict], baseline: dict, spec: SweepSpec, origin: str = "ba
 
 __all__ = ["DEFAULT_BASELINE", "SUITE", "BaselineError", "Finding", "RegressReport", "Tolerance", "baseline_from_rows",
            "check_suite", "compare", "read_baseline", "suite_spec", "write_baseline"]
+
+
+# ---------------------------------------------------------------- the run
+@dataclass
+class RegressRun:
+    """A finished ``regress``: the suite's sweep (``SweepResult``: rows, seconds, ...), the comparison with
+    the baseline (``report``; None when the baseline was rewritten) and the tolerance applied or kept."""
+
+    result: SweepResult
+    report: RegressReport | None
+    tolerance: Tolerance
+
+
+def regress(spec: SweepSpec, out: str | Path, executor, baseline_path: str | Path, *, update: bool = False,
+            baseline: dict | None = None, on_plan=None, on_result=None,
+            command_timeout_s: float | None = None) -> RegressRun:
+    """Run every run of the suite ``spec`` afresh into ``out`` and compare its figures with the baseline.
+
+    baseline: the baseline document, already read and checked against the suite
+    (``read_baseline``, ``check_suite``: a caller does it before the work; read here
+    when None). With ``update`` the baseline file is rewritten from this run
+    instead, keeping its tolerance (the default one for a new file). on_plan,
+    on_result, command_timeout_s: as ``run_sweep``'s. Raises BaselineError.
+    """
+    if not update and baseline is None:
+        baseline = read_baseline(baseline_path)
+        check_suite(baseline, spec, str(baseline_path))
+    result = run_sweep(spec, out, executor, rerun=True, retry_failed=True, on_plan=on_plan, on_result=on_result,
+                       command_timeout_s=command_timeout_s, report=False)  # the figures are the report
+    if update:
+        old = read_baseline(baseline_path) if Path(baseline_path).is_file() else {}
+        tolerance = Tolerance.from_dict(old["tolerance"], str(baseline_path)) if "tolerance" in old else Tolerance()
+        write_baseline(baseline_path, baseline_from_rows(result.rows, spec, tolerance))
+        return RegressRun(result, None, tolerance)
+    report = compare(result.rows, baseline, spec, origin=str(baseline_path))
+    return RegressRun(result, report, report.tolerance)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 
 from .executors import Executor, InlineExecutor
 from .spec import RunParams, SweepSpec

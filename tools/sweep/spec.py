@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from odometry.config import VARIANTS, ConfigError, OdometryConfig, config_from_dict, variant
-from simlidar.dataset import FORMAT_VERSION
+from simlidar.formats.salo import FORMAT_VERSION
 from simlidar.sensor import LidarModel, SensorError, load_sensor
 from simlidar.yaml_file import read_yaml
 

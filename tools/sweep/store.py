@@ -33,7 +33,7 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 
 RESULT_FILE = "result.json"
 PARAMS_FILE = "params.json"

@@ -14,7 +14,7 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 from tools.experiments.plots import save_png
 
 GROUP_COLUMNS = ("scene", "sensor", "noise_std_m", "variant")

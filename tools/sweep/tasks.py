@@ -22,7 +22,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from odometry.config import OdometryConfig
-from simlidar.dataset import atomic_write_text
+from simlidar.formats.atomic import atomic_write_text
 from simlidar.sensor import LidarModel
 
 from .store import PARAMS_FILE, Store
@@ -119,22 +119,17 @@ def simulate_task(job: SimJob, threads: int | None = None) -> dict:
 
 
 def _simulate(job: SimJob, out: Path, threads: int | None) -> None:
-    from simlidar.simulate import simulate_sequence
-    from simlidar.sweep import SweepSimulator
-    from tools.cli_scenes import build_world_and_trajectory
+    from tools.runners import PathTooShort, simulate_scene
+    from tools.worlds import build_scene_world
 
-    world, trajectory, info = build_world_and_trajectory(job.scene, job.seed, job.scene_overrides)
-    info["scene_seed"] = info.pop("seed")
-    available = int((trajectory.duration_s - job.start_s) / job.sensor.sweep_period_s)
-    if job.frames > available:
-        raise ValueError(f"scene {job.scene}: its path lasts {trajectory.duration_s:.1f} s, room for {available} "
-                         f"sweeps after start_s {job.start_s:g} s, not {job.frames}")
-    sim = SweepSimulator(world, job.sensor, seed=job.seed, motion_distortion=job.motion_distortion, threads=threads)
-    # force: a folder without a manifest here is debris (a complete one was caught above).
-    simulate_sequence(world, trajectory, job.sensor, out, frames=job.frames, seed=job.seed, t_start=job.start_s,
-                      motion_distortion=job.motion_distortion, simulator=sim, force=True,
-                      info={**info, "command": "sweep", "sim_key": job.sim_key,
-                            "noise_std_m": job.sensor.range_noise_std_m})
+    scene = build_scene_world(job.scene, job.seed, job.scene_overrides)
+    try:
+        # force: a folder without a manifest here is debris (a complete one was caught above).
+        simulate_scene(scene, job.sensor, out, job.frames, seed=job.seed, start_s=job.start_s,
+                       motion_distortion=job.motion_distortion, force=True, threads=threads,
+                       info={"command": "sweep", "sim_key": job.sim_key})
+    except PathTooShort as exc:  # recorded as it always was: a ValueError of the simulation
+        raise ValueError(str(exc)) from None
 
 
 # ---------------------------------------------------------------- odometry run
@@ -182,34 +177,33 @@ class _Failure(Exception):
 
 
 def _run_and_evaluate(job: RunJob, sequence_dir: Path, run_dir: Path, timings: dict) -> dict:
-    from odometry.metrics import evaluate_trajectory
-    from odometry.pipeline import run_sequence, write_diagnostics_csv, write_kitti_poses
-    from simlidar.dataset import open_sequence, read_kitti_poses
+    from simlidar.dataset import open_sequence
+    from simlidar.formats.kitti import read_kitti_poses
+    from tools.runners import RunFiles, evaluate_against_truth, run_method
 
     seq = open_sequence(sequence_dir)
     poses_path = run_dir / "poses.txt"
     diagnostics = {}
-    t0 = time.perf_counter()
     if job.command is not None:
+        t0 = time.perf_counter()
         run_external(job.command, sequence_dir, poses_path, run_dir / COMMAND_LOG, job.command_timeout_s,
                      job.workdir)
         T_est = read_kitti_poses(poses_path)
         if len(T_est) != len(seq):
             raise _Failure(f"external odometry wrote {len(T_est)} poses to {poses_path}, the sequence has "
                            f"{len(seq)} frames")
+        odometry_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        metrics = evaluate_against_truth(seq, T_est)
+        evaluate_s = time.perf_counter() - t0
     else:
-        run = run_sequence(seq, job.config)
-        T_est = run.poses
-        write_kitti_poses(poses_path, T_est)
-        write_diagnostics_csv(run_dir / "diagnostics.csv", run.diagnostics)
-        atomic_write_text(run_dir / "config.yaml", job.config.to_yaml())
-        diagnostics = {"extrapolated_frames": sum(d.extrapolated for d in run.diagnostics),
-                       "degenerate_frames": sum(d.degenerate for d in run.diagnostics)}
-    timings["odometry_s"] = time.perf_counter() - t0
-    timings["frames_per_s"] = len(T_est) / timings["odometry_s"] if timings["odometry_s"] > 0 else None
-    t0 = time.perf_counter()
-    metrics = evaluate_trajectory(seq.poses, T_est).to_dict()
-    timings["evaluate_s"] = time.perf_counter() - t0
+        result = run_method(seq, job.config, files=RunFiles.in_folder(run_dir), evaluate=True)
+        T_est, metrics, odometry_s, evaluate_s = result.poses, result.metrics, result.run_s, result.evaluate_s
+        diagnostics = {"extrapolated_frames": result.flags.extrapolated, "degenerate_frames": result.flags.degenerate}
+    timings["odometry_s"] = odometry_s
+    timings["frames_per_s"] = len(T_est) / odometry_s if odometry_s > 0 else None
+    timings["evaluate_s"] = evaluate_s
+    metrics = metrics.to_dict()
     atomic_write_text(run_dir / "metrics.json", json.dumps(metrics, indent=1) + "\n")
     return {"key": job.key, "sim_key": job.sim_key, "params": job.params, "status": "ok", "error": None,
             "metrics": metrics, "diagnostics": diagnostics, "timings": timings, "versions": versions(),

@@ -1,9 +1,9 @@
-"""ROS 2 bags read as a sequence: ``sensor_msgs/PointCloud2`` scans, ground truth from ``nav_msgs/Odometry``.
+"""ROS 2 bags: read as a sequence (``sensor_msgs/PointCloud2`` scans, ``nav_msgs/Odometry`` ground truth) and written.
 
 A bag is a rosbag2 folder (``metadata.yaml`` beside ``.mcap`` or ``.db3``
 storage files) or a single ``.mcap`` / ``.db3`` file; the pure-Python
 ``rosbags`` package reads it (an optional dependency: ``pip install
-salo-bench[ros]``). ``RosbagSequence`` behaves like ``simlidar.dataset.Sequence``
+salo-bench[ros]``). ``RosbagSequence`` behaves like ``simlidar.formats.scan_folders.Sequence``
 (``len``, indexing, iteration, ``times``, ``poses``, ``sensor``), so the
 odometry runs on a recorded bag unchanged.
 
@@ -53,7 +53,7 @@ frame is read the same way; each can be forced in ``RosbagSequence``):
 ``Frame.fields`` holds ``ring`` (uint16, 0 = lowest beam) and ``time_s``
 (float64, s since the sweep start) when the cloud has them, and every other
 per-point field under its own name (e.g. Ouster's ``reflectivity``). The
-ground-truth fields written by ``tools.export`` are regrouped as in a simulated
+ground-truth fields of ``simlidar.formats.points`` (what ``BagWriter`` writes) are regrouped as in a simulated
 sequence's sidecar: ``true_x/true_y/true_z`` -> ``true_xyz`` and
 ``normal_x/normal_y/normal_z`` -> ``normal``.
 
@@ -77,9 +77,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import se3
-from .dataset import DatasetError, Frame, read_kitti_poses
-from .sensor import LidarModel, load_sensor_file
+from .. import se3
+from ..sensor import LidarModel, load_sensor_file
+from ..sequence import DatasetError, Frame
+from .kitti import read_kitti_poses
+from .points import VECTOR_FIELDS
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +89,7 @@ POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TFMESSAGE = "tf2_msgs/msg/TFMessage"
 BAG_SUFFIXES = (".mcap", ".db3")
+STORAGES = ("mcap", "sqlite3")
 
 # sensor_msgs/PointField datatype codes -> numpy type codes (byte order added when read)
 POINTFIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -95,8 +98,6 @@ POINTFIELD_CODES = {v: k for k, v in POINTFIELD_TYPES.items()}
 TIME_FIELDS = ("time", "t", "timestamp", "time_stamp")
 RING_FIELDS = ("ring", "channel", "laser_id")
 INTENSITY_FIELDS = ("intensity",)
-# per-point vectors written as three scalar fields (the PCL naming) and read back as one
-VECTOR_FIELDS = {"true_xyz": ("true_x", "true_y", "true_z"), "normal": ("normal_x", "normal_y", "normal_z")}
 
 TIME_UNITS_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 MIN_SWEEP_S = 1e-3  # plausible time span of one sweep's points
@@ -105,7 +106,21 @@ RING_ORDERS = ("auto", "ascending", "descending", "laser_id")
 
 
 class BagError(DatasetError):
-    """A ROS 2 bag cannot be read as a lidar sequence; the message names the bag and the problem."""
+    """A ROS 2 bag cannot be read as a lidar sequence, or written; the message names the bag and the problem."""
+
+
+def require_rosbags(doing: str = "reading"):
+    """rosbags' ``rosbag2`` module and its ROS 2 Humble type store; BagError with the install hint without it.
+
+    doing: starts the message ("reading", or "<bag>: reading", "writing").
+    """
+    try:
+        import rosbags.rosbag2 as rosbag2
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise BagError(f"{doing} ROS 2 bags needs the optional 'rosbags' package: pip install 'salo-bench[ros]'"
+                       ) from None
+    return rosbag2, get_typestore(Stores.ROS2_HUMBLE)
 
 
 def is_bag(path: str | Path) -> bool:
@@ -281,7 +296,7 @@ def detect_ring_order(rings: np.ndarray, points: np.ndarray, min_points: int = 5
 
 # ---------------------------------------------------------------- the sequence
 class RosbagSequence:
-    """A ROS 2 bag's PointCloud2 topic as a sequence of ``simlidar.dataset.Frame``.
+    """A ROS 2 bag's PointCloud2 topic as a sequence of ``simlidar.sequence.Frame``.
 
     Args:
         path: rosbag2 folder, or ``.mcap`` / ``.db3`` file.
@@ -388,14 +403,7 @@ class RosbagSequence:
 
     # ---- opening
     def _rosbags(self):
-        try:
-            import rosbags.rosbag2 as rosbag2
-            from rosbags.typesys import Stores, get_typestore
-        except ImportError:
-            raise BagError(
-                f"{self.path}: reading ROS 2 bags needs the optional 'rosbags' package: pip install 'salo-bench[ros]'"
-            ) from None
-        return rosbag2, get_typestore(Stores.ROS2_HUMBLE)
+        return require_rosbags(f"{self.path}: reading")
 
     def _open_reader(self):
         if self._reader is None:
@@ -677,8 +685,121 @@ def open_bag(path: str | Path, sensor: LidarModel | None = None, poses: str | Pa
     return RosbagSequence(path, sensor=sensor, topic=topic, poses_file=poses)
 
 
+# ---------------------------------------------------------------- writing
+POINTS_TOPIC = "/points"
+ODOMETRY_TOPIC = "/ground_truth/odometry"
+TF_TOPIC = "/tf"
+LIDAR_FRAME = "lidar"
+MAP_FRAME = "map"
+
+
+def _quaternion_xyzw(T: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation  # not at import: `salo --help` loads the export's formats
+
+    return Rotation.from_matrix(T[:3, :3]).as_quat()
+
+
+class BagWriter:
+    """Write lidar frames as a rosbag2 folder (metadata version 8: read by more ROS 2 releases than 9).
+
+    Use as a context manager around ``write_frame`` calls. Topics:
+
+    - ``/points`` ``sensor_msgs/PointCloud2``, frame ``lidar``, one per sweep,
+      unorganized (height 1), little-endian, one record per point (the layout of
+      ``simlidar.formats.points``);
+    - with ``poses``: ``/ground_truth/odometry`` ``nav_msgs/Odometry``, frame
+      ``map`` -> child ``lidar``, the pose at the sweep start, zero covariances
+      and the body-frame twist given; ``/tf`` ``tf2_msgs/TFMessage``, the same pose.
+
+    Args:
+        path: the bag folder to create (must not exist; the storage file is named after it).
+        storage: "mcap" or "sqlite3". poses: write the odometry and tf topics.
+        custom_data: key -> text stored in the bag's metadata.
+    Attributes:
+        counts: messages written per topic.
+    """
+
+    def __init__(self, path: str | Path, storage: str = "mcap", poses: bool = True,
+                 custom_data: dict[str, str] | None = None):
+        rosbag2, self._ts = require_rosbags("writing")
+        plugin = rosbag2.StoragePlugin.MCAP if storage == "mcap" else rosbag2.StoragePlugin.SQLITE3
+        self._writer = rosbag2.Writer(Path(path), version=8, storage_plugin=plugin)
+        for key, value in (custom_data or {}).items():
+            self._writer.set_custom_data(key, value)
+        self._poses = poses
+        self.counts = {POINTS_TOPIC: 0}
+
+    def __enter__(self) -> BagWriter:
+        ts, writer = self._ts, self._writer
+        writer.open()
+        try:
+            self._c_points = writer.add_connection(POINTS_TOPIC, POINTCLOUD2, typestore=ts)
+            if self._poses:
+                self._c_odom = writer.add_connection(ODOMETRY_TOPIC, ODOMETRY, typestore=ts)
+                self._c_tf = writer.add_connection(TF_TOPIC, TFMESSAGE, typestore=ts)
+                self.counts[ODOMETRY_TOPIC] = self.counts[TF_TOPIC] = 0
+        except BaseException:
+            writer.close()
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._writer.close()
+
+    def write_frame(self, stamp_ns: int, record: np.ndarray, T_world_lidar: np.ndarray | None = None,
+                    twist: np.ndarray | None = None) -> None:
+        """One sweep: (N,) point records, stamped ``stamp_ns`` (header and log time); with poses, its
+        (4, 4) ``T_world_lidar`` and (6,) body twist (m/s, rad/s)."""
+        ts, T = self._ts, self._ts.types
+
+        def header(frame_id: str):
+            sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+            return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+                                            frame_id=frame_id)
+
+        def vec(cls: str, v) -> object:
+            return T[cls](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+        def quat(q) -> object:
+            return T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+
+        pfields = [T["sensor_msgs/msg/PointField"](name=f.name, offset=f.offset, datatype=f.datatype,
+                                                   count=f.count) for f in dtype_fields(record.dtype)]
+        xyz_ok = np.isfinite(record["x"]) & np.isfinite(record["y"]) & np.isfinite(record["z"])
+        cloud = T[POINTCLOUD2](
+            header=header(LIDAR_FRAME), height=1, width=len(record), fields=pfields,
+            is_bigendian=False, point_step=record.dtype.itemsize, row_step=record.dtype.itemsize * len(record),
+            data=np.frombuffer(record.tobytes(), dtype=np.uint8), is_dense=bool(np.all(xyz_ok)),
+        )
+        self._writer.write(self._c_points, stamp_ns, ts.serialize_cdr(cloud, POINTCLOUD2))
+        self.counts[POINTS_TOPIC] += 1
+        if not self._poses:
+            return
+        P = T_world_lidar
+        pose = T["geometry_msgs/msg/Pose"](position=vec("geometry_msgs/msg/Point", P[:3, 3]),
+                                           orientation=quat(_quaternion_xyzw(P)))
+        odom = T[ODOMETRY](
+            header=header(MAP_FRAME), child_frame_id=LIDAR_FRAME,
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](linear=vec("geometry_msgs/msg/Vector3", twist[:3]),
+                                                   angular=vec("geometry_msgs/msg/Vector3", twist[3:])),
+                covariance=np.zeros(36)),
+        )
+        self._writer.write(self._c_odom, stamp_ns, ts.serialize_cdr(odom, ODOMETRY))
+        tf = T[TFMESSAGE](transforms=[T["geometry_msgs/msg/TransformStamped"](
+            header=header(MAP_FRAME), child_frame_id=LIDAR_FRAME,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=vec("geometry_msgs/msg/Vector3", P[:3, 3]),
+                rotation=quat(_quaternion_xyzw(P))))])
+        self._writer.write(self._c_tf, stamp_ns, ts.serialize_cdr(tf, TFMESSAGE))
+        self.counts[ODOMETRY_TOPIC] += 1
+        self.counts[TF_TOPIC] += 1
+
+
 __all__ = [
     "BagError",
+    "BagWriter",
     "CloudLayout",
     "PointFieldSpec",
     "RosbagSequence",
@@ -687,4 +808,5 @@ __all__ = [
     "dtype_fields",
     "is_bag",
     "open_bag",
+    "require_rosbags",
 ]

@@ -1,17 +1,14 @@
 """The experiment commands of ``salo``: ``experiment table|rejectors|ncf`` and ``report``.
 
 Thin commands over ``tools.experiments``: parse, build the parameters, run the
-library call, write the run folder, print where it went. Register them on the
-main parser with ``add_commands(subparsers)``.
+library call, write the run folder, print where it went.
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
-from tools.argtypes import real_number, whole_number
+from .common import CommandError, command_line, parse_assignments, real_number, whole_number
 
 DEFAULT_ROOT = Path("out/experiments")
 DEFAULT_CACHE = DEFAULT_ROOT / "sequences"
@@ -156,21 +153,14 @@ def _add_generalize(sub) -> None:
 
 
 # ---------------------------------------------------------------- helpers
-def _error(message: str) -> Exception:
-    from tools.cli import CommandError  # late: tools.cli imports this module
-
-    return CommandError(message)
-
-
 def _config_overrides(pairs: list[str]) -> tuple:
     from odometry.config import ConfigError, variant
-    from tools.cli import parse_assignments
 
     changes = parse_assignments(pairs)
     try:
         variant("salo").replace(**changes)  # validate once, with the message naming the key
     except (ConfigError, TypeError) as exc:
-        raise _error(f"--set: {exc}") from None
+        raise CommandError(f"--set: {exc}") from None
     return tuple(sorted(changes.items()))
 
 
@@ -187,12 +177,8 @@ def _specs(text: str | None, default: list, args, quick_frames: int, start_defau
         else:
             specs = [s.with_changes(**common, **({"frames": frames} if frames else {})) for s in default]
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     return tuple(specs)
-
-
-def _command_line() -> list[str]:
-    return ["salo", *sys.argv[1:]]
 
 
 def _finish(record, out: Path) -> None:
@@ -227,12 +213,12 @@ def cmd_table(args) -> int:
             config_overrides=_config_overrides(args.config_set),
         )
     except ValueError as exc:
-        raise _error(str(exc)) from None
-    record = RunRecord(args.out, "table", params.to_dict(), _command_line()).start()
+        raise CommandError(str(exc)) from None
+    record = RunRecord(args.out, "table", params.to_dict(), command_line()).start()
     try:
         result = run_table(params, args.cache, record=record, progress=args.progress)
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     write_table(result, record)
     print((args.out / "table.md").read_text(), end="")
     for v in salo_vs_bl(result):
@@ -252,9 +238,9 @@ def _parse_levels(text: str) -> tuple:
     try:
         levels = tuple((float(a), float(b)) for a, b in (t.split(":") for t in text.split(",") if t.strip()))
     except ValueError:
-        raise _error(f"--levels {text!r}: expected L_R_DEG:L_T_M pairs, e.g. 1:0.1,3:0.3") from None
+        raise CommandError(f"--levels {text!r}: expected L_R_DEG:L_T_M pairs, e.g. 1:0.1,3:0.3") from None
     if not levels or any(a < 0 or b < 0 for a, b in levels):
-        raise _error(f"--levels {text!r}: need at least one non-negative pair")
+        raise CommandError(f"--levels {text!r}: need at least one non-negative pair")
     return levels
 
 
@@ -275,17 +261,17 @@ def cmd_rejectors(args) -> int:
     specs = _specs(args.sequences, default, args, quick_frames=REJECTORS_QUICK_FRAMES)
     targets = tuple(t.strip() for t in args.targets.split(",") if t.strip())
     if not targets or any(t not in TARGETS for t in targets):
-        raise _error(f"--targets {args.targets!r}: choose from {', '.join(TARGETS)}")
+        raise CommandError(f"--targets {args.targets!r}: choose from {', '.join(TARGETS)}")
     levels = _parse_levels(args.levels) if args.levels else (((0.0, 0.0), (5.0, 0.5)) if args.quick
                                                              else DEFAULT_LEVELS)
     params = RejectorStudyParams(pairs=args.pairs or (4 if args.quick else 100), levels=levels, targets=targets,
                                  sequences=specs, seed=args.seed, config_overrides=_config_overrides(args.config_set),
                                  map_frames=args.map_frames)
-    record = RunRecord(args.out, "rejectors", params.to_dict(), _command_line()).start()
+    record = RunRecord(args.out, "rejectors", params.to_dict(), command_line()).start()
     try:
         result = run_rejector_study(params, args.cache, progress=args.progress)
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     write_rejector_study(result, record)
     for kind, f in result.finding.items():
         print(f"{kind:8s} target at the true pose: GCR precision {f['gcr_precision']:.3f} recall "
@@ -316,17 +302,17 @@ def cmd_ncf(args) -> int:
         levels = (tuple(float(x) for x in args.noise_levels.split(",")) if args.noise_levels
                   else ((0.01, 0.02) if args.quick else DEFAULT_NOISE_LEVELS_M))
     except ValueError:
-        raise _error("--scans SCENE[:SEED],... and --noise-levels S1,S2,... (metres)") from None
+        raise CommandError("--scans SCENE[:SEED],... and --noise-levels S1,S2,... (metres)") from None
     if any(n <= 0 for n in levels):
-        raise _error("--noise-levels: every level must be > 0 m")
+        raise CommandError("--noise-levels: every level must be > 0 m")
     params = NcfStudyParams(noise_levels_m=levels, scans=tuple(scans),
                             max_points_per_scan=args.max_points or (1500 if args.quick else None), seed=args.seed,
                             config_overrides=_config_overrides(args.config_set))
-    record = RunRecord(args.out, "ncf", params.to_dict(), _command_line()).start()
+    record = RunRecord(args.out, "ncf", params.to_dict(), command_line()).start()
     try:
         result = run_ncf_study(params, args.cache, progress=args.progress)
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     write_ncf_study(result, record)
     for r in result.overview:
         print(f"{r['model']:9s} noise {1000 * r['noise_std_m']:4g} mm: {r['points']} points, median error "
@@ -356,7 +342,7 @@ def cmd_generalize(args) -> int:
     try:
         seeds = tuple(int(s) for s in _csv(args.seeds))
     except ValueError:
-        raise _error(f"--seeds {args.seeds!r}: expected whole numbers, e.g. 1,2") from None
+        raise CommandError(f"--seeds {args.seeds!r}: expected whole numbers, e.g. 1,2") from None
     quick = args.quick
     try:
         params = GeneralizeParams(
@@ -371,9 +357,9 @@ def cmd_generalize(args) -> int:
         )
         params.sequences()  # unknown families fail here, before anything is written
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     out = args.out or DEFAULT_ROOT / f"generalize-{args.split}"
-    record = RunRecord(out, "generalize", params.to_dict(), _command_line()).start()
+    record = RunRecord(out, "generalize", params.to_dict(), command_line()).start()
     results = run_generalize(params, record=record, workers=args.workers, progress=args.progress)
     rows = write_generalize(results, params, record)
     for r in rows:
@@ -392,17 +378,6 @@ def cmd_report(args) -> int:
     try:
         path = write_report(args.results, out, fmt=args.format)
     except ReportError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     print(f"wrote {path}")
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover - usable before tools/cli.py registers it
-    import logging
-
-    parser = argparse.ArgumentParser(prog="salo")
-    parser.add_argument("-v", "--verbose", action="store_true")
-    add_commands(parser.add_subparsers(dest="command", required=True))
-    ns = parser.parse_args()
-    logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING)
-    sys.exit(ns.func(ns))

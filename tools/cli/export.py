@@ -1,14 +1,10 @@
-"""``salo export``: a sequence as a ROS 2 bag, PLY / PCD scans or a TUM trajectory.
-
-A thin command over ``tools.export``. Register it in ``tools/cli.py`` with
-``add_commands(sub)``.
-"""
+"""``salo export``: a sequence as a ROS 2 bag, PLY / PCD scans or a TUM trajectory (over ``tools.export``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from tools.argtypes import real_number
+from .common import CommandError, frames_selected, parse_frames, progress_bar, real_number
 
 
 def add_commands(subparsers) -> None:
@@ -43,7 +39,6 @@ def add_commands(subparsers) -> None:
 
 def cmd_export(args) -> int:
     from simlidar.dataset import open_sequence
-    from tools.cli import CommandError, _progress, parse_frames
     from tools.export import export
 
     if args.ascii and args.format != "pcd":
@@ -58,8 +53,8 @@ def cmd_export(args) -> int:
     if args.format == "tum":
         result = export(seq, args.format, args.out, frames, **options)
     else:
-        n = len(range(*(frames or slice(None)).indices(len(seq))))
-        bar = _progress(n, "frame", f"export {args.format}")
+        n = frames_selected(len(seq), frames)
+        bar = progress_bar(n, "frame", f"export {args.format}")
         try:
             result = export(seq, args.format, args.out, frames, on_frame=lambda k: bar.update(1), **options)
         finally:

@@ -7,16 +7,10 @@ over ``tools.sweep``: parse, call the library, print.
 from __future__ import annotations
 
 import os
-import sys
+from contextlib import contextmanager
 from pathlib import Path
 
-from tools.argtypes import real_number, whole_number
-
-
-def _command_error(message: str) -> Exception:
-    from tools.cli import CommandError  # late: tools.cli imports this module
-
-    return CommandError(message)
+from .common import CommandError, real_number, run_counter, whole_number
 
 
 def _add_executor_args(p) -> None:
@@ -79,29 +73,6 @@ def add_commands(subparsers) -> None:
 
 
 # ---------------------------------------------------------------- helpers
-def _progress(desc: str):
-    """A run counter on stderr and the two callbacks that drive it (plan, then each result)."""
-    from tqdm import tqdm
-
-    state = {"bar": None, "failed": 0}
-
-    def on_plan(plan) -> None:
-        state["bar"] = tqdm(total=len(plan.runs), initial=plan.skipped, unit="run", desc=desc, dynamic_ncols=True,
-                            file=sys.stderr)
-
-    def on_result(row) -> None:
-        if row["status"] != "ok":
-            state["failed"] += 1
-            state["bar"].set_postfix(failed=state["failed"])
-        state["bar"].update(1)
-
-    def close() -> None:
-        if state["bar"] is not None:
-            state["bar"].close()
-
-    return on_plan, on_result, close
-
-
 def _describe_plan(plan, executor) -> str:
     sequences = len({r.sim_key for r in plan.runs})
     text = (f"{len(plan.runs)} runs over {sequences} sequences: {plan.skipped} done, {len(plan.todo)} to run"
@@ -119,26 +90,27 @@ def _executor(args):
         try:
             import distributed  # noqa: F401
         except ImportError:
-            raise _command_error("--scheduler needs Dask: pip install 'salo-bench[cluster]'") from None
+            raise CommandError("--scheduler needs Dask: pip install 'salo-bench[cluster]'") from None
     return make_executor(args.workers, args.scheduler)
 
 
-def _run(spec, out: Path, args, rerun: bool, desc: str, report: bool = True):
-    from tools.sweep import StoreBusy, run_sweep
+@contextmanager
+def _sweeping(args, desc: str):
+    """The executor ``--workers`` / ``--scheduler`` ask for, and ``run_sweep``'s callbacks: print the plan,
+    then count the runs on stderr. A store another sweep holds is a one-line error."""
+    from tools.sweep import StoreBusy
 
     executor = _executor(args)
-    on_plan, on_result, close = _progress(desc)
+    on_plan, on_result, close = run_counter(desc)
 
     def plan_then_bar(plan) -> None:
         print(f"{desc}: {_describe_plan(plan, executor)}", flush=True)
         on_plan(plan)
 
     try:
-        return run_sweep(spec, out, executor, rerun=rerun, retry_failed=not getattr(args, "keep_failed", False),
-                         on_plan=plan_then_bar, on_result=on_result, command_timeout_s=args.timeout,
-                         report=report)
+        yield executor, {"on_plan": plan_then_bar, "on_result": on_result}
     except StoreBusy as exc:
-        raise _command_error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     finally:
         close()
 
@@ -153,7 +125,7 @@ def _print_failures(rows) -> None:
 
 # ---------------------------------------------------------------- sweep
 def cmd_sweep(args) -> int:
-    from tools.sweep import SpecError, Store, load_spec, plan_sweep
+    from tools.sweep import SpecError, Store, load_spec, plan_sweep, run_sweep
     from tools.sweep.summary import format_markdown, summarize
 
     try:
@@ -165,9 +137,11 @@ def cmd_sweep(args) -> int:
             for run in plan.todo:
                 print(f"  {run.key}  {run.label}")
             return 0
-        result = _run(spec, out, args, args.rerun, f"sweep {spec.name}")
+        with _sweeping(args, f"sweep {spec.name}") as (executor, callbacks):
+            result = run_sweep(spec, out, executor, rerun=args.rerun, retry_failed=not args.keep_failed,
+                               command_timeout_s=args.timeout, **callbacks)
     except SpecError as exc:
-        raise _command_error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     print()
     print(format_markdown(summarize(result.rows)), end="")
     _print_failures(result.rows)
@@ -180,48 +154,35 @@ def cmd_sweep(args) -> int:
 
 # ---------------------------------------------------------------- regress
 def cmd_regress(args) -> int:
+    from dataclasses import replace
+
     from tools.sweep import SpecError, load_spec
-    from tools.sweep.regress import (
-        DEFAULT_BASELINE,
-        BaselineError,
-        Tolerance,
-        baseline_from_rows,
-        check_suite,
-        compare,
-        read_baseline,
-        suite_spec,
-        write_baseline,
-    )
+    from tools.sweep.regress import DEFAULT_BASELINE, BaselineError, check_suite, read_baseline, regress, suite_spec
 
     if args.odometry_command and args.baseline is None:
-        raise _command_error("--odometry-command needs --baseline FILE: your odometry's own baseline "
-                             "(write it once with --update)")
+        raise CommandError("--odometry-command needs --baseline FILE: your odometry's own baseline "
+                           "(write it once with --update)")
     baseline_path = args.baseline or DEFAULT_BASELINE
     try:
         suite = load_spec(args.suite) if args.suite else None
         spec = suite_spec(args.odometry_command, suite, variant_name=args.name)
         if args.keep_sequences:
-            from dataclasses import replace
-
             spec = replace(spec, keep_sequences=True)
         baseline = None
         if not args.update:
             baseline = read_baseline(baseline_path)  # fail before the work: missing, or for another suite
             check_suite(baseline, spec, str(baseline_path))
-        result = _run(spec, args.out, args, True, "regress", report=False)  # its own table below
-        rows = result.rows
-        print()
-        if args.update:
-            old = read_baseline(baseline_path) if baseline_path.is_file() else {}
-            tolerance = (Tolerance.from_dict(old["tolerance"], str(baseline_path)) if "tolerance" in old
-                         else Tolerance())
-            write_baseline(baseline_path, baseline_from_rows(rows, spec, tolerance))
-            _print_figures(rows, None, tolerance)
-            print(f"\nwrote the baseline {baseline_path}: {len(rows)} runs ({result.seconds:.0f} s)")
-            return 0
-        report = compare(rows, baseline, spec, origin=str(baseline_path))
+        with _sweeping(args, "regress") as (executor, callbacks):
+            done = regress(spec, args.out, executor, baseline_path, update=args.update, baseline=baseline,
+                           command_timeout_s=args.timeout, **callbacks)
     except (SpecError, BaselineError) as exc:
-        raise _command_error(str(exc)) from None
+        raise CommandError(str(exc)) from None
+    rows, result, report = done.result.rows, done.result, done.report
+    print()
+    if args.update:
+        _print_figures(rows, None, done.tolerance)
+        print(f"\nwrote the baseline {baseline_path}: {len(rows)} runs ({result.seconds:.0f} s)")
+        return 0
     _print_figures(rows, baseline, report.tolerance)
     improved = [f for f in report.findings if f.kind == "improved"]
     if improved:

@@ -1,0 +1,157 @@
+"""Sequences read from folders of scan files: the ``Sequence`` type, real KITTI, plain scan folders.
+
+``Sequence`` reads its frames lazily, one ``.bin`` (KITTI) or ``.ply`` file per
+frame, with an optional ``.npy`` sidecar of per-point fields each. Its readers:
+
+- ``open_kitti_folder``: a KITTI odometry sequence (``velodyne/*.bin`` beside
+  ``calib.txt``), ground truth from the camera-frame poses file converted to
+  the lidar frame with ``calib.txt``'s ``Tr``;
+- ``open_scan_folder``: a folder of ``.bin`` / ``.ply`` scans (or its
+  ``velodyne/``), with ``sensor.yaml``, ``poses.txt`` and ``times.txt`` when present.
+
+The simulator's own folder layout is ``simlidar.formats.salo``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from .. import se3
+from ..sensor import LidarModel, load_sensor_file
+from ..sequence import DatasetError, Frame
+from .atomic import sha256_file
+from .kitti import camera_poses_to_lidar, check_bin_size, read_bin, read_kitti_calib_tr, read_kitti_poses, read_times
+from .ply import read_ply_scan
+
+
+class Sequence:
+    """A readable sequence: ``len``, indexing and iteration give ``Frame`` objects.
+
+    Attributes:
+        path: the folder. kind: "salo", "kitti" or "scans".
+        scan_files: one ``.bin`` or ``.ply`` per frame. sidecar_files: one ``.npy`` per frame, or None.
+        sensor: LidarModel or None. poses: (N, 4, 4) ``T_first_lidar`` or None.
+        times: (N,) s or None. manifest: dict (simulated sequences) or {}.
+    """
+
+    def __init__(self, path: Path, kind: str, scan_files: list[Path], sensor, poses, times,
+                 manifest: dict | None = None, sidecar_files: list[Path] | None = None):
+        self.path = path
+        self.kind = kind
+        self.scan_files = scan_files
+        self.sidecar_files = sidecar_files
+        self.sensor = sensor
+        self.poses = poses
+        self.times = times
+        self.manifest = manifest or {}
+
+    def __len__(self) -> int:
+        return len(self.scan_files)
+
+    def __iter__(self) -> Iterator[Frame]:
+        for k in range(len(self)):
+            yield self[k]
+
+    def __getitem__(self, k: int) -> Frame:
+        if not -len(self) <= k < len(self):
+            raise IndexError(f"{self.path}: frame {k} out of range (0..{len(self) - 1})")
+        k = k % len(self)
+        f = self.scan_files[k]
+        if f.suffix == ".ply":
+            pts, inten, record = read_ply_scan(f)
+            return Frame(k, pts, inten, record, f)
+        data = read_bin(f)
+        fields = None
+        if self.sidecar_files is not None:
+            car = self.sidecar_files[k]
+            try:
+                fields = np.load(car, allow_pickle=False)
+            except (OSError, ValueError) as exc:
+                raise DatasetError(f"{car}: cannot read sidecar ({exc})") from None
+            if len(fields) != len(data):
+                raise DatasetError(
+                    f"{car}: {len(fields)} records but {f.name} has {len(data)} points"
+                )
+        return Frame(k, data[:, :3].astype(np.float64), data[:, 3].copy(), fields, f)
+
+    def verify(self) -> None:
+        """Check every file against the manifest's sha256 (simulated sequences only)."""
+        for rel, digest in self.manifest.get("files", {}).items():
+            p = self.path / rel
+            if not p.is_file():
+                raise DatasetError(f"{p}: listed in the manifest but missing")
+            if sha256_file(p) != digest:
+                raise DatasetError(f"{p}: checksum differs from the manifest (file changed?)")
+
+
+def check_bin_sizes(scans: list[Path]) -> None:
+    """Refuse, when a sequence is opened, a ``.bin`` that is not whole 16-byte points (one stat each)."""
+    for f in scans:
+        if f.suffix == ".bin":
+            check_bin_size(f, f.stat().st_size)
+
+
+def _scan_list(folder: Path, exts: tuple[str, ...]) -> list[Path]:
+    return sorted(p for p in folder.iterdir() if p.suffix in exts and not p.name.startswith("."))
+
+
+# ---------------------------------------------------------------- real KITTI
+def is_kitti_folder(path: Path) -> bool:
+    """A KITTI odometry sequence folder: ``calib.txt`` beside ``velodyne/``."""
+    return path.is_dir() and (path / "calib.txt").is_file() and (path / "velodyne").is_dir()
+
+
+def open_kitti_folder(path: Path, sensor: LidarModel | None = None, poses: str | Path | None = None,
+                      topic: str | None = None) -> Sequence:
+    """A KITTI odometry sequence. poses: the camera-frame ground truth (default
+    ``<sequences>/../poses/NN.txt`` when present). topic: does not apply."""
+    scans = _scan_list(path / "velodyne", (".bin",))
+    if not scans:
+        raise DatasetError(f"{path / 'velodyne'}: no .bin scans")
+    check_bin_sizes(scans)
+    times = read_times(path / "times.txt") if (path / "times.txt").is_file() else None
+    lidar_poses = None
+    if poses is None:
+        guess = path.parent.parent / "poses" / f"{path.name}.txt"
+        poses = guess if guess.is_file() else None
+    if poses is not None:
+        cam = read_kitti_poses(poses)
+        Tr = read_kitti_calib_tr(path / "calib.txt")
+        if len(cam) < len(scans):
+            raise DatasetError(f"{poses}: {len(cam)} poses for {len(scans)} scans")
+        lidar_poses = camera_poses_to_lidar(cam[: len(scans)], Tr)
+    if sensor is None and (path / "sensor.yaml").is_file():
+        sensor = load_sensor_file(path / "sensor.yaml")
+    return Sequence(path, "kitti", scans, sensor, lidar_poses, times)
+
+
+# ---------------------------------------------------------------- plain scan folders
+def open_scan_folder(path: Path, sensor: LidarModel | None = None, poses: str | Path | None = None,
+                     topic: str | None = None) -> Sequence:
+    """A folder of ``.bin`` / ``.ply`` scans. poses: a KITTI pose file (default ``poses.txt`` in the
+    folder), made relative to its first pose. topic: does not apply."""
+    folder = path / "velodyne" if (path / "velodyne").is_dir() else path
+    scans = _scan_list(folder, (".bin", ".ply"))
+    if not scans:
+        raise DatasetError(f"{path}: no .bin or .ply scans (and no manifest.json or calib.txt)")
+    check_bin_sizes(scans)
+    if sensor is None:
+        for name in ("sensor.yaml", "sensor.yml"):
+            if (path / name).is_file():
+                sensor = load_sensor_file(path / name)
+                break
+    rel_poses = None
+    pf = Path(poses) if poses is not None else path / "poses.txt"
+    if pf.is_file():
+        rel_poses = read_kitti_poses(pf)
+        if len(rel_poses) < len(scans):
+            raise DatasetError(f"{pf}: {len(rel_poses)} poses for {len(scans)} scans")
+        rel_poses = se3.inverse(rel_poses[0]) @ rel_poses[: len(scans)]
+    times = read_times(path / "times.txt") if (path / "times.txt").is_file() else None
+    return Sequence(path, "scans", scans, sensor, rel_poses, times)
+
+
+__all__ = ["Sequence", "check_bin_sizes", "is_kitti_folder", "open_kitti_folder", "open_scan_folder"]

@@ -1,0 +1,7 @@
+"""``python -m tools.cli``: the ``salo`` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
