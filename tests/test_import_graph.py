@@ -11,7 +11,9 @@ the project module it loads (``from pkg import name`` is the module
 (c) the package rules: ``odometry`` imports only Embree-free ``simlidar``
     modules (no ``embreex`` among everything they import, transitively) and no
     plotting code, and never ``scenes`` or ``tools``; ``scenes`` and ``simlidar``
-    import neither each other nor ``tools``; nothing imports ``tools`` but ``tools``.
+    import neither each other nor ``tools``; nothing imports ``tools`` but ``tools``;
+    ``paramspec`` (which every package may import) imports no project module and
+    nothing outside the standard library.
 
 The checks are functions of a graph, so the synthetic graphs at the end show
 that each of them can fail.
@@ -20,10 +22,11 @@ that each of them can fail.
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("simlidar", "scenes", "odometry", "tools")
+PACKAGES = ("paramspec", "simlidar", "scenes", "odometry", "tools")
 CLI = "tools.cli"
 EMBREE = "embreex"
 PLOTTING = ("matplotlib", "pyvista", "vtk", "vtkmodules")
@@ -152,7 +155,8 @@ def reachable(graph: dict[str, set[str]], start: str) -> set[str]:
 
 def package_violations(graph: dict[str, set[str]], external: dict[str, set[str]]) -> list[str]:
     """(c) the package rules of ARCHITECTURE.md."""
-    forbidden = {"odometry": {"scenes", "tools"}, "scenes": {"simlidar", "tools"}, "simlidar": {"scenes", "tools"}}
+    forbidden = {"odometry": {"scenes", "tools"}, "scenes": {"simlidar", "tools"}, "simlidar": {"scenes", "tools"},
+                 "paramspec": {"simlidar", "scenes", "odometry", "tools"}}
     out = []
     for src, dsts in sorted(graph.items()):
         pkg = package_of(src)
@@ -163,6 +167,10 @@ def package_violations(graph: dict[str, set[str]], external: dict[str, set[str]]
                 loads = {m for m in reachable(graph, dst) if EMBREE in external.get(m, ())}
                 if loads:
                     out.append(f"{src} imports {dst}, which loads Embree (through {', '.join(sorted(loads))})")
+        if pkg == "paramspec":
+            outside = sorted(e for e in external.get(src, ()) if e not in sys.stdlib_module_names)
+            if outside:
+                out.append(f"{src} imports {', '.join(outside)}: paramspec uses the standard library only")
         if pkg == "odometry":
             plotting = {m for m in reachable(graph, src)
                         if any(p in external.get(m, ()) for p in PLOTTING)}
@@ -176,7 +184,8 @@ GRAPH, EXTERNAL = build_graph(module_files())
 
 
 def test_the_graph_covers_the_project():
-    assert len(GRAPH) > 80 and {"simlidar.dataset", "odometry.pipeline", "tools.cli", "tools.cli.common"} <= set(GRAPH)
+    assert len(GRAPH) > 80 and {"simlidar.dataset", "odometry.pipeline", "tools.cli", "tools.cli.common",
+                                "paramspec.declare"} <= set(GRAPH)
     # relative imports resolved, in-function imports seen, `from pkg import submodule` as the submodule
     assert "simlidar.formats.kitti" in GRAPH["simlidar.formats.salo"]  # from .kitti import ...
     assert "simlidar.formats.rosbag" in GRAPH["simlidar.dataset"]  # from .formats import rosbag
@@ -212,8 +221,9 @@ def test_the_checks_catch_synthetic_violations():
         "simlidar.d": {"tools.x", "scenes.y"}, "tools.x": set(), "scenes.y": {"simlidar.d"},  # package rules
         "odometry.p": {"simlidar.e"}, "simlidar.e": {"simlidar.raycast"}, "simlidar.raycast": set(),
         "odometry.q": {"odometry.plots"}, "odometry.plots": set(),
+        "paramspec.x": {"scenes.y"},
     }
-    external = {"simlidar.raycast": {EMBREE}, "odometry.plots": {"matplotlib"}}
+    external = {"simlidar.raycast": {EMBREE}, "odometry.plots": {"matplotlib"}, "paramspec.x": {"numpy", "math"}}
     assert cli_violations(graph) == ["tools.sweep.tasks imports the command-line module tools.cli.common"]
     assert sorted(cycles(graph)) == [["scenes.y", "simlidar.d"], ["simlidar.a", "simlidar.b", "simlidar.c"]]
     found = package_violations(graph, external)
@@ -222,6 +232,8 @@ def test_the_checks_catch_synthetic_violations():
     assert any("scenes.y imports simlidar.d" in f for f in found)
     assert any("odometry.p imports simlidar.e, which loads Embree (through simlidar.raycast)" in f for f in found)
     assert any("odometry.q loads plotting code (through odometry.plots)" in f for f in found)
+    assert any("paramspec.x imports scenes.y: paramspec may not import scenes" in f for f in found)
+    assert any("paramspec.x imports numpy: paramspec uses the standard library only" in f for f in found)
 
 
 def test_relative_and_in_function_imports_are_resolved(tmp_path):
