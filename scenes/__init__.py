@@ -1,7 +1,8 @@
 """Procedural, seeded worlds with drivable paths and smooth 6-DoF lidar trajectories.
 
-Each scene module has a frozen ``Params`` dataclass (fields with defaults and
-help text), a one-line ``DESCRIPTION`` and ``build(params) -> Scene``. This
+Each scene module has a frozen ``Params`` dataclass (fields declared with
+``scenes.params.param``: default, help, bounds), a one-line ``DESCRIPTION`` and
+``build(params) -> Scene``. This
 package knows nothing of the simulator: it makes a mesh and poses.
 
     from scenes import build_scene, scene_parameters
@@ -20,7 +21,7 @@ from typing import Any
 
 from . import canyon, city, forest, highway, open_field, suburb, tunnel
 from .base import LABELS, MeshBuilder, Scene
-from .params import ParamInfo, describe, resolve
+from .params import ParamInfo, describe, resolve, scene_section
 
 log = logging.getLogger(__name__)
 
@@ -43,13 +44,19 @@ def _module(name: str) -> ModuleType:
 
 
 def scene_parameters(name: str) -> list[ParamInfo]:
-    """The parameters of scene ``name`` with defaults, types, bounds and help text."""
+    """The parameters of scene ``name`` with defaults, types, units, bounds and help text."""
     return describe(_module(name).Params)
 
 
+def scene_schema(name: str):
+    """The parameters of scene ``name`` as a ``paramspec.Section`` (named after the scene, its description as help)."""
+    module = _module(name)
+    return scene_section(name, module.Params, module.DESCRIPTION)
+
+
 def resolve_params(name: str, seed: int = 0, **overrides: Any):
-    """The validated ``Params`` of scene ``name`` (``ValueError`` names a bad parameter)."""
-    return resolve(_module(name).Params, {"seed": seed, **overrides})
+    """The validated ``Params`` of scene ``name`` (a ``ParamError``, a ``ValueError``, names a bad parameter)."""
+    return resolve(_module(name).Params, {"seed": seed, **overrides}, origin=f"scene {name}")
 
 
 def build_scene(name: str, seed: int = 0, **overrides: Any) -> Scene:
@@ -64,4 +71,4 @@ def build_scene(name: str, seed: int = 0, **overrides: Any) -> Scene:
 
 
 __all__ = ["LABELS", "SCENES", "MeshBuilder", "ParamInfo", "Scene", "build_scene", "resolve_params",
-           "scene_parameters"]
+           "scene_parameters", "scene_schema"]

@@ -33,7 +33,7 @@ import numpy as np
 from . import geometry as g
 from . import paths, props, tunnel
 from .base import MeshBuilder, Scene, check_budget
-from .params import CommonParams, param
+from .params import CommonParams, ParamError, param
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "street canyon of continuous tall facades leading into a tunnel, open road after it"
@@ -47,58 +47,55 @@ PARK_FROM_KERB_M = 1.05
 
 @dataclass(frozen=True)
 class Params(CommonParams):
-    street_length_m: float = param(180.0, "street from the start to the tunnel's portal, m", min=50.0, max=3000.0)
-    street_width_m: float = param(14.0, "road width kerb to kerb (two lanes, parking both sides), m",
+    street_length_m: float = param(180.0, "street from the start to the tunnel's portal", min=50.0, max=3000.0)
+    street_width_m: float = param(14.0, "road width kerb to kerb (two lanes, parking both sides)",
                                   min=8.0, max=30.0)
-    sidewalk_width_m: float = param(3.5, "sidewalk width, kerb to building line, m", min=1.5, max=8.0)
-    kerb_height_m: float = param(0.15, "kerb height, m", min=0.0, max=0.3)
-    street_curve_radius_m: float = param(0.0, "radius of the street's left curve (0: straight), m", min=0.0,
+    sidewalk_width_m: float = param(3.5, "sidewalk width, kerb to building line", min=1.5, max=8.0)
+    kerb_height_m: float = param(0.15, "kerb height", min=0.0, max=0.3)
+    street_curve_radius_m: float = param(0.0, "radius of the street's left curve (0: straight)", min=0.0,
                                          max=1e6)
-    building_height_min_m: float = param(15.0, "lowest building, m", min=6.0, max=200.0)
-    building_height_max_m: float = param(40.0, "tallest building, m", min=6.0, max=300.0)
+    building_height_min_m: float = param(15.0, "lowest building", min=6.0, max=200.0)
+    building_height_max_m: float = param(40.0, "tallest building", min=6.0, max=300.0)
     facade_relief: float = param(0.5, "how much the facades are modelled: 0 flat walls, 1 every facade with "
                                  "window recesses, shop fronts, balconies, cornices", min=0.0, max=1.0)
     gap_fraction: float = param(0.06, "share of the lots left as alleys between the buildings", min=0.0, max=0.6)
     parked_car_fraction: float = param(0.5, "share of parking places holding a car", min=0.0, max=1.0)
-    light_spacing_m: float = param(30.0, "spacing of lamp posts on each sidewalk (0: none), m", min=0.0,
+    light_spacing_m: float = param(30.0, "spacing of lamp posts on each sidewalk (0: none)", min=0.0,
                                    max=1000.0)
-    tunnel_length_m: float = param(120.0, "tunnel length portal to portal, m", min=30.0, max=5000.0)
+    tunnel_length_m: float = param(120.0, "tunnel length portal to portal", min=30.0, max=5000.0)
     tunnel_cross_section: str = param("box", "shape of the bore", choices=("arch", "box"))
-    tunnel_width_m: float = param(10.5, "bore width wall to wall (two lanes and walkways), m", min=7.0, max=30.0)
-    tunnel_height_m: float = param(6.5, "clear height at the bore's crown, m", min=4.5, max=20.0)
-    walkway_width_m: float = param(1.0, "raised walkway along each tunnel wall, m", min=0.0, max=3.0)
-    overburden_m: float = param(20.0, "height of the hill above the road mid-tunnel, m", min=2.0, max=500.0)
-    feature_spacing_m: float = param(60.0, "spacing of lights/cabinets/fans in the tunnel (0: bare bore), m",
+    tunnel_width_m: float = param(10.5, "bore width wall to wall (two lanes and walkways)", min=7.0, max=30.0)
+    tunnel_height_m: float = param(6.5, "clear height at the bore's crown", min=4.5, max=20.0)
+    walkway_width_m: float = param(1.0, "raised walkway along each tunnel wall", min=0.0, max=3.0)
+    overburden_m: float = param(20.0, "height of the hill above the road mid-tunnel", min=2.0, max=500.0)
+    feature_spacing_m: float = param(60.0, "spacing of lights/cabinets/fans in the tunnel (0: bare bore)",
                                      min=0.0, max=10000.0)
-    exit_m: float = param(100.0, "open road after the tunnel, m", min=20.0, max=3000.0)
-    grade_pct: float = param(0.0, "road grade, percent (rising)", min=-8.0, max=8.0)
-    lane_offset_m: float = param(1.75, "the vehicle drives this far right of the centre-line, m", min=0.0, max=5.0)
+    exit_m: float = param(100.0, "open road after the tunnel", min=20.0, max=3000.0)
+    grade_pct: float = param(0.0, "road grade (positive: rising)", min=-8.0, max=8.0)
+    lane_offset_m: float = param(1.75, "the vehicle drives this far right of the centre-line", min=0.0, max=5.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.building_height_max_m < self.building_height_min_m:
-            raise ValueError("parameter building_height_max_m: below building_height_min_m")
+            raise ParamError("is below building_height_min_m", "building_height_max_m")
         if self.street_curve_radius_m and self.street_curve_radius_m < 300.0:
-            raise ValueError("parameter street_curve_radius_m: a gentle curve needs a radius >= 300 m (or 0)")
+            raise ParamError("is too tight: a gentle curve needs a radius >= 300 m (or 0)", "street_curve_radius_m")
         if self.street_curve_radius_m and self.street_length_m / self.street_curve_radius_m > np.pi / 2:
-            raise ValueError(
-                f"parameter street_curve_radius_m: a {self.street_length_m:g} m street on a "
-                f"{self.street_curve_radius_m:g} m radius turns more than 90 degrees"
-            )
+            raise ParamError(f"is too tight: a {self.street_length_m:g} m street on a "
+                             f"{self.street_curve_radius_m:g} m radius turns more than 90 degrees",
+                             "street_curve_radius_m")
         if self.lane_offset_m > self.tunnel_width_m / 2 - self.walkway_width_m - 1.2:
-            raise ValueError(f"parameter lane_offset_m: {self.lane_offset_m} m puts the vehicle on the "
-                             f"tunnel's walkway")
+            raise ParamError(f"is {self.lane_offset_m} m: that puts the vehicle on the tunnel's walkway",
+                             "lane_offset_m")
         if self.lane_offset_m > self.street_width_m / 2 - 1.5:
-            raise ValueError(f"parameter lane_offset_m: {self.lane_offset_m} m leaves the street")
+            raise ParamError(f"is {self.lane_offset_m} m: that leaves the street", "lane_offset_m")
         if self.street_width_m / 2 + self.sidewalk_width_m < self.tunnel_width_m / 2 + 1.0:
-            raise ValueError(
-                "parameter tunnel_width_m: the bore must be narrower than the street's building line "
-                "(tunnel_width_m / 2 + 1 <= street_width_m / 2 + sidewalk_width_m)"
-            )
+            raise ParamError("is too wide: the bore must be narrower than the street's building line "
+                             "(tunnel_width_m / 2 + 1 <= street_width_m / 2 + sidewalk_width_m)", "tunnel_width_m")
         if self.overburden_m < self.tunnel_height_m + 1.0:
-            raise ValueError("parameter overburden_m: must exceed tunnel_height_m + 1 (the hill covers the bore)")
+            raise ParamError("must exceed tunnel_height_m + 1 (the hill covers the bore)", "overburden_m")
         if self.tunnel_cross_section == "arch" and self.tunnel_height_m < self.tunnel_width_m / 2 + 1.0:
-            raise ValueError("parameter tunnel_height_m: an arch needs tunnel_height_m >= tunnel_width_m / 2 + 1")
+            raise ParamError("is too low: an arch needs tunnel_height_m >= tunnel_width_m / 2 + 1", "tunnel_height_m")
 
     def bore(self) -> tunnel.Bore:
         """The tunnel's bore for ``tunnel.add_bore`` / ``add_fittings``."""

@@ -25,7 +25,7 @@ import numpy as np
 from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
-from .params import CommonParams, param
+from .params import CommonParams, ParamError, param
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "street grid of blocks with varied buildings, parked cars, poles, trees; a loop route"
@@ -35,49 +35,45 @@ DESCRIPTION = "street grid of blocks with varied buildings, parked cars, poles, 
 class Params(CommonParams):
     streets_x: int = param(4, "number of streets running along y (north-south)", min=2, max=12)
     streets_y: int = param(3, "number of streets running along x (east-west)", min=2, max=12)
-    block_length_m: float = param(80.0, "block size along x, kerb to kerb, m", min=30.0, max=300.0)
-    block_width_m: float = param(60.0, "block size along y, kerb to kerb, m", min=30.0, max=300.0)
-    street_width_m: float = param(12.0, "road width kerb to kerb (two lanes + parking), m", min=7.0, max=30.0)
-    sidewalk_width_m: float = param(3.5, "sidewalk width, m", min=1.5, max=8.0)
-    kerb_height_m: float = param(0.15, "kerb height, m", min=0.0, max=0.4)
-    building_height_min_m: float = param(8.0, "lowest building, m", min=3.0, max=100.0)
-    building_height_max_m: float = param(35.0, "tallest building, m", min=3.0, max=300.0)
-    setback_max_m: float = param(4.0, "largest setback of a facade behind the sidewalk, m", min=0.5, max=15.0)
+    block_length_m: float = param(80.0, "block size along x, kerb to kerb", min=30.0, max=300.0)
+    block_width_m: float = param(60.0, "block size along y, kerb to kerb", min=30.0, max=300.0)
+    street_width_m: float = param(12.0, "road width kerb to kerb (two lanes + parking)", min=7.0, max=30.0)
+    sidewalk_width_m: float = param(3.5, "sidewalk width", min=1.5, max=8.0)
+    kerb_height_m: float = param(0.15, "kerb height", min=0.0, max=0.4)
+    building_height_min_m: float = param(8.0, "lowest building", min=3.0, max=100.0)
+    building_height_max_m: float = param(35.0, "tallest building", min=3.0, max=300.0)
+    setback_max_m: float = param(4.0, "largest setback of a facade behind the sidewalk", min=0.5, max=15.0)
     parked_car_fraction: float = param(0.45, "share of parking places holding a car", min=0.0, max=1.0)
-    tree_spacing_m: float = param(16.0, "spacing of street trees (0: none), m", min=0.0, max=200.0)
-    light_spacing_m: float = param(32.0, "spacing of street lights (0: none), m", min=0.0, max=200.0)
-    ground_roughness_m: float = param(0.3, "standard deviation of the ground's undulation, m", min=0.0, max=3.0)
+    tree_spacing_m: float = param(16.0, "spacing of street trees (0: none)", min=0.0, max=200.0)
+    light_spacing_m: float = param(32.0, "spacing of street lights (0: none)", min=0.0, max=200.0)
+    ground_roughness_m: float = param(0.3, "standard deviation of the ground's undulation", min=0.0, max=3.0)
     route_blocks: int = param(3, "number of adjacent blocks the loop route goes around", min=1, max=60)
     closed_loop: bool = param(True, "drive a full loop back to the start (else stop 30 m short)")
-    turn_radius_m: float = param(9.0, "radius of the centre-line's turns at intersections, m", min=4.0, max=30.0)
-    lane_offset_m: float = param(2.0, "the vehicle drives this far right of the centre-line, m",
+    turn_radius_m: float = param(9.0, "radius of the centre-line's turns at intersections", min=4.0, max=30.0)
+    lane_offset_m: float = param(2.0, "the vehicle drives this far right of the centre-line",
                                  min=0.0, max=6.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.building_height_max_m < self.building_height_min_m:
-            raise ValueError("parameter building_height_max_m: below building_height_min_m")
+            raise ParamError("is below building_height_min_m", "building_height_max_m")
         if self.lane_offset_m > self.street_width_m / 2 - 2.5:
-            raise ValueError(
-                f"parameter lane_offset_m: {self.lane_offset_m} m leaves the lane in a "
-                f"{self.street_width_m} m street (at most street_width_m / 2 - 2.5)"
-            )
+            raise ParamError(f"is {self.lane_offset_m} m: that leaves the lane in a {self.street_width_m} m "
+                             f"street (at most street_width_m / 2 - 2.5)", "lane_offset_m")
         if self.route_blocks > (self.streets_x - 1) * (self.streets_y - 1):
-            raise ValueError(
-                f"parameter route_blocks: {self.route_blocks} is more than the "
-                f"{(self.streets_x - 1) * (self.streets_y - 1)} blocks between the streets"
-            )
+            raise ParamError(f"is {self.route_blocks}: more than the "
+                             f"{(self.streets_x - 1) * (self.streets_y - 1)} blocks between the streets",
+                             "route_blocks")
         # On a right turn the lane's arc (radius turn - offset about a centre on the corner's
         # diagonal) must pass the kerb corner by a car's half width and a margin (0.95 + 0.5 m),
         # plus 0.3 m that the path's smoothing cuts from the arc.
         r_path = self.turn_radius_m - self.lane_offset_m
         corner = np.sqrt(2.0) * abs(self.turn_radius_m - self.street_width_m / 2)
         if r_path < 4.0 or r_path - corner < 1.75:
-            raise ValueError(
-                f"parameter turn_radius_m: with {self.street_width_m:g} m streets and the lane "
-                f"{self.lane_offset_m:g} m right of the centre, a {self.turn_radius_m:g} m turn "
-                f"{'is too tight for a car' if r_path < 4.0 else 'cuts over the kerb corner'}"
-            )
+            raise ParamError(
+                f"is {self.turn_radius_m:g} m: with {self.street_width_m:g} m streets and the lane "
+                f"{self.lane_offset_m:g} m right of the centre, such a turn "
+                f"{'is too tight for a car' if r_path < 4.0 else 'cuts over the kerb corner'}", "turn_radius_m")
 
 
 def build(p: Params) -> Scene:

@@ -30,15 +30,15 @@ STEP_M = 0.5
 
 @dataclass(frozen=True)
 class Params(CommonParams):
-    speed_m_s: float = param(12.0, "cruise speed of the vehicle, m/s", min=0.5, max=60.0)
-    length_m: float = param(800.0, "length of the road, m", min=100.0, max=10000.0)
-    road_width_m: float = param(6.0, "road width, m", min=3.0, max=15.0)
-    verge_m: float = param(2.5, "tree-free verge beside the road, m", min=0.5, max=30.0)
-    min_curve_radius_m: float = param(80.0, "smallest curve radius, m", min=20.0, max=1e6)
-    forest_depth_m: float = param(70.0, "depth of the forest on each side of the road, m", min=10.0, max=500.0)
+    speed_m_s: float = param(12.0, "cruise speed of the vehicle", min=0.5, max=60.0)
+    length_m: float = param(800.0, "length of the road", min=100.0, max=10000.0)
+    road_width_m: float = param(6.0, "road width", min=3.0, max=15.0)
+    verge_m: float = param(2.5, "tree-free verge beside the road", min=0.5, max=30.0)
+    min_curve_radius_m: float = param(80.0, "smallest curve radius", min=20.0, max=1e6)
+    forest_depth_m: float = param(70.0, "depth of the forest on each side of the road", min=10.0, max=500.0)
     tree_density_per_ha: float = param(250.0, "trees per hectare", min=0.0, max=2000.0)
     conifer_fraction: float = param(0.6, "share of conifers among the trees", min=0.0, max=1.0)
-    roughness_m: float = param(2.0, "standard deviation of the ground's relief, m", min=0.0, max=20.0)
+    roughness_m: float = param(2.0, "standard deviation of the ground's relief", min=0.0, max=20.0)
     shrubs_per_ha: float = param(60.0, "undergrowth shrubs per hectare", min=0.0, max=2000.0)
 
 

@@ -20,7 +20,7 @@ from . import alignment as al
 from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
-from .params import CommonParams, param
+from .params import CommonParams, ParamError, param
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "divided multi-lane highway with guard rails, sparse signs and gantries, open land"
@@ -32,29 +32,29 @@ UP = np.array([0.0, 0.0, 1.0])
 
 @dataclass(frozen=True)
 class Params(CommonParams):
-    speed_m_s: float = param(25.0, "cruise speed of the vehicle, m/s", min=0.5, max=60.0)
+    speed_m_s: float = param(25.0, "cruise speed of the vehicle", min=0.5, max=60.0)
     lateral_accel_m_s2: float = param(
-        1.5, "lateral acceleration allowed in turns (slows the vehicle in curves), m/s^2", min=0.1, max=10.0
+        1.5, "lateral acceleration allowed in turns (slows the vehicle in curves)", min=0.1, max=10.0
     )
-    length_m: float = param(1500.0, "length of the road, m", min=200.0, max=20000.0)
+    length_m: float = param(1500.0, "length of the road", min=200.0, max=20000.0)
     lanes: int = param(3, "lanes per direction", min=1, max=6)
-    lane_width_m: float = param(3.5, "lane width, m", min=2.5, max=5.0)
-    shoulder_m: float = param(2.5, "hard shoulder outside the lanes, m", min=0.0, max=5.0)
-    median_m: float = param(3.0, "median width between the carriageways (barrier in its middle), m",
+    lane_width_m: float = param(3.5, "lane width", min=2.5, max=5.0)
+    shoulder_m: float = param(2.5, "hard shoulder outside the lanes", min=0.0, max=5.0)
+    median_m: float = param(3.0, "median width between the carriageways (barrier in its middle)",
                             min=1.0, max=30.0)
     lane: int = param(2, "lane the vehicle drives in, counted from the right (1 = rightmost)", min=1, max=6)
-    min_curve_radius_m: float = param(1000.0, "smallest curve radius, m", min=250.0, max=1e6)
-    max_grade_pct: float = param(2.0, "steepest grade, percent", min=0.0, max=8.0)
-    sign_spacing_m: float = param(400.0, "spacing of roadside signs (0: none), m", min=0.0, max=20000.0)
-    gantry_spacing_m: float = param(700.0, "spacing of sign gantries over the road (0: none), m",
+    min_curve_radius_m: float = param(1000.0, "smallest curve radius", min=250.0, max=1e6)
+    max_grade_pct: float = param(2.0, "steepest grade", min=0.0, max=8.0)
+    sign_spacing_m: float = param(400.0, "spacing of roadside signs (0: none)", min=0.0, max=20000.0)
+    gantry_spacing_m: float = param(700.0, "spacing of sign gantries over the road (0: none)",
                                     min=0.0, max=20000.0)
-    land_roughness_m: float = param(3.0, "standard deviation of the land's relief, m", min=0.0, max=30.0)
+    land_roughness_m: float = param(3.0, "standard deviation of the land's relief", min=0.0, max=30.0)
     tree_groups: int = param(25, "groups of trees scattered in the land", min=0, max=1000)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.lane > self.lanes:
-            raise ValueError(f"parameter lane: {self.lane} but the road has {self.lanes} lanes")
+            raise ParamError(f"is {self.lane} but the road has {self.lanes} lanes", "lane")
 
 
 def build(p: Params) -> Scene:

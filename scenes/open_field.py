@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
-from .params import CommonParams, param
+from .params import CommonParams, ParamError, param
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "open wasteland with sparse rocks and shrubs, a dirt-track loop"
@@ -27,20 +27,20 @@ STEP_M = 0.5
 
 @dataclass(frozen=True)
 class Params(CommonParams):
-    speed_m_s: float = param(8.0, "cruise speed of the vehicle, m/s", min=0.5, max=60.0)
-    size_m: float = param(700.0, "side of the square of land, m", min=200.0, max=5000.0)
-    roughness_m: float = param(1.5, "standard deviation of the terrain's relief, m", min=0.0, max=20.0)
-    loop_radius_m: float = param(110.0, "mean radius of the track loop, m", min=30.0, max=2000.0)
+    speed_m_s: float = param(8.0, "cruise speed of the vehicle", min=0.5, max=60.0)
+    size_m: float = param(700.0, "side of the square of land", min=200.0, max=5000.0)
+    roughness_m: float = param(1.5, "standard deviation of the terrain's relief", min=0.0, max=20.0)
+    loop_radius_m: float = param(110.0, "mean radius of the track loop", min=30.0, max=2000.0)
     rocks: int = param(40, "number of rocks", min=0, max=100000)
     shrubs: int = param(80, "number of shrubs", min=0, max=100000)
-    track_clearance_m: float = param(4.0, "no rock or shrub closer to the track's centre than this, m",
+    track_clearance_m: float = param(4.0, "no rock or shrub closer to the track's centre than this",
                                      min=2.5, max=100.0)
-    grid_m: float = param(4.0, "terrain mesh spacing, m", min=0.5, max=20.0)
+    grid_m: float = param(4.0, "terrain mesh spacing", min=0.5, max=20.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.loop_radius_m * 1.5 > self.size_m / 2 - 10.0:
-            raise ValueError("parameter loop_radius_m: the loop does not fit in the land (see size_m)")
+            raise ParamError("is too large: the loop does not fit in the land (see size_m)", "loop_radius_m")
 
 
 def random_loop(rng: np.random.Generator, radius_m: float, step_m: float,

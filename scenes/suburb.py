@@ -35,7 +35,7 @@ from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
 from .open_field import random_loop
-from .params import CommonParams, param
+from .params import CommonParams, ParamError, param
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "winding suburban loop over rolling terrain: detached houses, gardens, trees, parked cars"
@@ -52,23 +52,23 @@ PARK_FROM_KERB_M = 1.05  # a parked car's centre from the kerb
 
 @dataclass(frozen=True)
 class Params(CommonParams):
-    loop_length_m: float = param(700.0, "length of the loop road's centre-line, m", min=250.0, max=3000.0)
+    loop_length_m: float = param(700.0, "length of the loop road's centre-line", min=250.0, max=3000.0)
     loop_wiggle: float = param(0.12, "largest relative amplitude of each of the loop's bends (harmonics 2-4 of "
                                "its radius; 0: a circle)", min=0.0, max=0.25)
-    min_curve_radius_m: float = param(25.0, "tightest bend of the road's centre-line, m", min=12.0, max=1000.0)
-    road_width_m: float = param(10.0, "road width kerb to kerb (two lanes, parking where it fits), m",
+    min_curve_radius_m: float = param(25.0, "tightest bend of the road's centre-line", min=12.0, max=1000.0)
+    road_width_m: float = param(10.0, "road width kerb to kerb (two lanes, parking where it fits)",
                                 min=6.0, max=16.0)
-    lane_offset_m: float = param(1.5, "the vehicle drives this far right of the centre-line, m", min=0.0, max=5.0)
-    sidewalk_width_m: float = param(1.8, "sidewalk width, m", min=1.0, max=5.0)
-    kerb_height_m: float = param(0.12, "kerb height, m", min=0.0, max=0.3)
-    max_grade_pct: float = param(5.0, "steepest grade of the driven lane (the terrain is scaled to it), percent",
+    lane_offset_m: float = param(1.5, "the vehicle drives this far right of the centre-line", min=0.0, max=5.0)
+    sidewalk_width_m: float = param(1.8, "sidewalk width", min=1.0, max=5.0)
+    kerb_height_m: float = param(0.12, "kerb height", min=0.0, max=0.3)
+    max_grade_pct: float = param(5.0, "steepest grade of the driven lane (the terrain is scaled to it)",
                                  min=0.0, max=10.0)
-    hill_wavelength_m: float = param(250.0, "typical wavelength of the terrain's undulations, m",
+    hill_wavelength_m: float = param(250.0, "typical wavelength of the terrain's undulations",
                                      min=80.0, max=2000.0)
     houses_per_100m: float = param(6.0, "houses per 100 m of road on each side (fewer where they do not fit)",
                                    min=0.0, max=12.0)
-    setback_min_m: float = param(4.0, "shortest front garden, sidewalk to facade, m", min=2.0, max=50.0)
-    setback_max_m: float = param(14.0, "longest front garden, sidewalk to facade, m", min=2.0, max=60.0)
+    setback_min_m: float = param(4.0, "shortest front garden, sidewalk to facade", min=2.0, max=50.0)
+    setback_max_m: float = param(14.0, "longest front garden, sidewalk to facade", min=2.0, max=60.0)
     storeys_max: int = param(2, "most storeys of a house (1 to this)", min=1, max=3)
     garage_fraction: float = param(0.5, "share of houses with an attached garage", min=0.0, max=1.0)
     fence_fraction: float = param(0.6, "share of front gardens with a hedge or fence along the sidewalk",
@@ -76,29 +76,23 @@ class Params(CommonParams):
     trees_per_100m: float = param(8.0, "garden trees per 100 m of road (both sides)", min=0.0, max=60.0)
     park_trees_per_ha: float = param(25.0, "trees per hectare in the land beyond the houses", min=0.0, max=400.0)
     parked_cars_per_100m: float = param(4.0, "parked cars per 100 m of road (both kerbs)", min=0.0, max=30.0)
-    light_spacing_m: float = param(45.0, "spacing of lamp posts, alternating sides (0: none), m",
+    light_spacing_m: float = param(45.0, "spacing of lamp posts, alternating sides (0: none)",
                                    min=0.0, max=1000.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.setback_max_m < self.setback_min_m:
-            raise ValueError("parameter setback_max_m: below setback_min_m")
+            raise ParamError("is below setback_min_m", "setback_max_m")
         if self.lane_offset_m > self.road_width_m / 2 - 1.5:
-            raise ValueError(
-                f"parameter lane_offset_m: {self.lane_offset_m} m leaves a {self.road_width_m} m road "
-                f"(at most road_width_m / 2 - 1.5)"
-            )
+            raise ParamError(f"is {self.lane_offset_m} m: that leaves a {self.road_width_m} m road "
+                             f"(at most road_width_m / 2 - 1.5)", "lane_offset_m")
         if self.loop_length_m / (2 * np.pi) < 1.5 * self.min_curve_radius_m:
-            raise ValueError(
-                f"parameter min_curve_radius_m: a {self.loop_length_m:g} m loop cannot keep its bends above "
-                f"{self.min_curve_radius_m:g} m (at most loop_length_m / (3 pi))"
-            )
+            raise ParamError(f"is too large: a {self.loop_length_m:g} m loop cannot keep its bends above "
+                             f"{self.min_curve_radius_m:g} m (at most loop_length_m / (3 pi))", "min_curve_radius_m")
         half = self.road_width_m / 2 + self.sidewalk_width_m + BEVEL_M
         if self.min_curve_radius_m < half + 5.0:
-            raise ValueError(
-                f"parameter min_curve_radius_m: bends tighter than the road's half width + 5 m ({half + 5.0:g} m) "
-                f"fold its inner edge"
-            )
+            raise ParamError(f"is too small: bends tighter than the road's half width + 5 m ({half + 5.0:g} m) "
+                             f"fold its inner edge", "min_curve_radius_m")
 
 
 class _Footprints:

@@ -25,7 +25,7 @@ import numpy as np
 from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
-from .params import CommonParams, param
+from .params import CommonParams, ParamError, param
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "long tunnel (box or arched, straight or curved) under a hill, portals, open road both ends"
@@ -37,37 +37,36 @@ FAN_CLEARANCE_M = 4.5  # usual clear height of a road tunnel: nothing hangs lowe
 
 @dataclass(frozen=True)
 class Params(CommonParams):
-    speed_m_s: float = param(15.0, "cruise speed of the vehicle, m/s", min=0.5, max=60.0)
-    length_m: float = param(500.0, "tunnel length portal to portal, m", min=50.0, max=10000.0)
-    approach_m: float = param(80.0, "open road before and after the tunnel, m", min=20.0, max=2000.0)
+    speed_m_s: float = param(15.0, "cruise speed of the vehicle", min=0.5, max=60.0)
+    length_m: float = param(500.0, "tunnel length portal to portal", min=50.0, max=10000.0)
+    approach_m: float = param(80.0, "open road before and after the tunnel", min=20.0, max=2000.0)
     cross_section: str = param("arch", "shape of the bore", choices=("arch", "box"))
-    width_m: float = param(10.5, "bore width wall to wall (two lanes and walkways), m", min=7.0, max=30.0)
-    height_m: float = param(7.0, "clear height at the bore's crown, m", min=4.5, max=20.0)
-    walkway_width_m: float = param(1.0, "raised walkway along each wall, m", min=0.0, max=3.0)
-    curve_radius_m: float = param(0.0, "radius of the tunnel's curve, left turning (0: straight), m",
+    width_m: float = param(10.5, "bore width wall to wall (two lanes and walkways)", min=7.0, max=30.0)
+    height_m: float = param(7.0, "clear height at the bore's crown", min=4.5, max=20.0)
+    walkway_width_m: float = param(1.0, "raised walkway along each wall", min=0.0, max=3.0)
+    curve_radius_m: float = param(0.0, "radius of the tunnel's curve, left turning (0: straight)",
                                   min=0.0, max=1e6)
-    grade_pct: float = param(1.0, "road grade, percent (rising)", min=-8.0, max=8.0)
-    feature_spacing_m: float = param(80.0, "spacing of lights/cabinets/fans inside (0: bare bore), m",
+    grade_pct: float = param(1.0, "road grade (positive: rising)", min=-8.0, max=8.0)
+    feature_spacing_m: float = param(80.0, "spacing of lights/cabinets/fans inside (0: bare bore)",
                                      min=0.0, max=10000.0)
-    overburden_m: float = param(25.0, "height of the hill above the road mid-tunnel, m", min=2.0, max=500.0)
-    lane_offset_m: float = param(1.75, "the vehicle drives this far right of the centre-line, m",
+    overburden_m: float = param(25.0, "height of the hill above the road mid-tunnel", min=2.0, max=500.0)
+    lane_offset_m: float = param(1.75, "the vehicle drives this far right of the centre-line",
                                  min=0.0, max=5.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.curve_radius_m and self.curve_radius_m < 100.0:
-            raise ValueError("parameter curve_radius_m: a road tunnel curve needs a radius >= 100 m (or 0)")
+            raise ParamError("is too tight: a road tunnel curve needs a radius >= 100 m (or 0)", "curve_radius_m")
         if self.curve_radius_m and self.length_m / self.curve_radius_m > np.pi / 2:
-            raise ValueError(
-                f"parameter curve_radius_m: a {self.length_m:g} m tunnel on a {self.curve_radius_m:g} m "
-                f"radius turns more than 90 degrees (gently curved: radius >= length_m / (pi / 2))"
-            )
+            raise ParamError(f"is too tight: a {self.length_m:g} m tunnel on a {self.curve_radius_m:g} m radius "
+                             f"turns more than 90 degrees (gently curved: radius >= length_m / (pi / 2))",
+                             "curve_radius_m")
         if self.lane_offset_m > self.width_m / 2 - self.walkway_width_m - 1.2:
-            raise ValueError(f"parameter lane_offset_m: {self.lane_offset_m} m puts the vehicle on the walkway")
+            raise ParamError(f"is {self.lane_offset_m} m: that puts the vehicle on the walkway", "lane_offset_m")
         if self.overburden_m < self.height_m + 1.0:
-            raise ValueError("parameter overburden_m: must exceed height_m + 1 (the hill covers the bore)")
+            raise ParamError("must exceed height_m + 1 (the hill covers the bore)", "overburden_m")
         if self.cross_section == "arch" and self.height_m < self.width_m / 2 + 1.0:
-            raise ValueError("parameter height_m: an arch needs height_m >= width_m / 2 + 1")
+            raise ParamError("is too low: an arch needs height_m >= width_m / 2 + 1", "height_m")
 
 
 def alignment(length_total: float, start_curve: float, curve_len: float, radius: float,

@@ -266,10 +266,11 @@ def test_cli_bad_input(tmp_path, capsys):
         ([*scene, "--scene-params", str(tunnel), "--seed", "3"],
          f"--seed 3 and seed: 0 in {tunnel} differ: both set the scene seed, give one"),
         ([*scene, "--set", "seed=5", "--seed", "3"], "--seed 3 and --set seed=5 differ"),
-        ([*scene, "--set", "seed=abc"], "--set seed=abc: parameter seed: 'abc' is not a valid int"),
-        ([*scene, "--set", "seed=1.5"], "--set seed=1.5: parameter seed: '1.5' is not a valid int"),
-        ([*scene, "--set", "seed=-2"], "--set seed=-2: parameter seed: -2 is below the minimum 0"),
-        ([*scene, "--set", "length_m=long"], "parameter length_m: 'long' is not a valid float"),
+        ([*scene, "--set", "seed=abc"], "--set seed=abc: key 'seed' must be an integer >= 0, got 'abc'"),
+        ([*scene, "--set", "seed=1.5"], "--set seed=1.5: key 'seed' must be an integer >= 0, got '1.5'"),
+        ([*scene, "--set", "seed=-2"], "--set seed=-2: key 'seed' must be an integer >= 0, got -2"),
+        ([*scene, "--set", "length_m=long"],
+         "scene tunnel: key 'length_m' must be a number in [50, 10000] (m), got 'long'"),
         ([*scene, "--seed", "-1"], "argument --seed: must be at least 0, got -1"),
     ]
     for extra, words in cases:

@@ -17,6 +17,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from paramspec import ParamError, assignments
+
 
 class CommandError(Exception):
     """A command cannot proceed; the message says why."""
@@ -141,12 +143,10 @@ def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> d
             if isinstance(value, (dict, list)):
                 raise ValueError(f"{path}: parameter {key}: expected a single value")
             out[key] = value
-    for pair in pairs or []:
-        key, sep, value = pair.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ValueError(f"override {pair!r}: expected KEY=VALUE (e.g. length_m=800)")
-        out[key] = value.strip()
+    try:
+        out.update(assignments(pairs or [], what="override"))
+    except ParamError as exc:
+        raise ValueError(f"{exc} (e.g. length_m=800)") from None
     return out
 
 
@@ -169,10 +169,7 @@ def split_seed(overrides: dict[str, Any], cli_seed: int | None, pairs: list[str]
     value = rest.pop("seed")
     set_pairs = [p.strip() for p in pairs or [] if p.partition("=")[0].strip() == "seed"]
     origin = f"--set {set_pairs[-1]}" if set_pairs else f"{yaml_file}" if yaml_file is not None else "seed"
-    try:
-        seed = resolve(CommonParams, {"seed": value}).seed
-    except ValueError as exc:
-        raise ValueError(f"{origin}: {exc}") from None
+    seed = resolve(CommonParams, {"seed": value}, origin=origin).seed
     if cli_seed is not None and int(cli_seed) != seed:
         where = origin if set_pairs else f"seed: {seed} in {origin}"
         raise ValueError(f"--seed {cli_seed} and {where} differ: both set the scene seed, give one")

@@ -9,6 +9,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from paramspec import help_text
+
 from .common import CommandError, parse_overrides, split_seed, whole_number
 
 
@@ -79,22 +81,12 @@ def cmd_scenes(args) -> int:
         return 0
     for name in names:
         _out(f"{name}: {scenes.SCENES[name].DESCRIPTION}")
-        if args.name is None:
-            continue
-        for p in scenes.scene_parameters(name):
-            bounds = ""
-            if p.choices:
-                bounds = f" [{'|'.join(p.choices)}]"
-            elif p.min is not None or p.max is not None:
-                lo = "" if p.min is None else f"{p.min:g}"
-                hi = "" if p.max is None else f"{p.max:g}"
-                bounds = f" [{lo}..{hi}]"
-            _out(f"  {p.name:24s} {p.type:5s} = {p.default!s:10s} {p.help}{bounds}")
+        if args.name is not None:
+            _out(help_text(scenes.scene_schema(name), header=True))
     if args.name is None:
         _out("\n`salo scenes NAME` lists a scene's parameters; override them with --set KEY=VALUE "
              "or --params FILE.yaml")
     return 0
-
 
 
 def _scene_from_args(name: str, args):
