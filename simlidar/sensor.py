@@ -30,84 +30,73 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from paramspec import Param, ParamError, Params, Section, param, schema
+
 from .yaml_file import read_yaml
 
-REQUIRED_KEYS = (
-    "name",
-    "rings",
-    "azimuth_step_deg",
-    "rotation_hz",
-    "range_noise_std_m",
-    "min_range_m",
-    "max_range_m",
-)
-OPTIONAL_KEYS = (
-    "vertical_angles_deg",
-    "ring_pitch_deg",
-    "lowest_angle_deg",
-    "azimuth_offsets_deg",
-    "laser_interval_s",
-    "start_azimuth_deg",
-    "ring_bias_std_m",
-    "angular_jitter_deg",
-    "dropout_probability",
-    "intensity_range_ref_m",
-    "description",
-    "source",
-)
+
+class SensorError(ParamError):
+    """A sensor description is invalid; the message names the file or sensor, the key and the problem."""
 
 
-class SensorError(ValueError):
-    """A sensor description is invalid; the message names the key and the problem."""
+def _non_empty(name: str) -> str | None:
+    return None if name else "must be a non-empty string"
+
+
+def _distinct(angles: tuple[float, ...]) -> str | None:
+    if len(set(angles)) != len(angles):
+        return "has repeated angles; every ring needs its own elevation"
+    return None
 
 
 @dataclass(frozen=True)
-class LidarModel:
-    """A spinning multi-beam lidar.
+class LidarModel(Params):
+    """A spinning multi-beam lidar (degrees and metres as in YAML; radian views are properties).
 
-    Attributes (degrees and metres as in YAML; radian views are properties):
-        name: preset or user name.
-        vertical_angles_deg: (rings,) elevation of each laser in laser-id order.
-        azimuth_step_deg: phi, rotation between two firing columns.
-        rotation_hz: spin rate; one sweep lasts ``1 / rotation_hz`` s.
-        range_noise_std_m: standard deviation of Gaussian noise along the beam.
-        min_range_m, max_range_m: returns outside this measured range are dropped.
-        azimuth_offsets_deg: (rings,) per-laser horizontal offset (laser-id order).
-        laser_interval_s: time between successive lasers within a column.
-        start_azimuth_deg: azimuth of column 0.
-        ring_bias_std_m: std of a fixed per-laser range bias drawn once per sensor
-            seed (0 = off). Real lasers have one; it is a systematic error.
-        angular_jitter_deg: std of Gaussian jitter on each beam's elevation and
-            azimuth (0 = off).
-        dropout_probability: chance that a return is lost (0 = off).
-        intensity_range_ref_m: range beyond which intensity falls off as 1/r^2.
-        description, source: free text; ``source`` cites where the figures come from.
+    Each field is a key of a sensor YAML file, declared with its type, unit,
+    bounds and help (``salo sensors --keys``, ``docs/parameters.md``). Lists given
+    per laser keep the file's (laser-id) order. ``ring_bias_std_m`` is a fixed
+    per-laser range bias drawn once per sensor seed: real lasers have one, a
+    systematic error. Rules between keys (ranges, per-laser lists, timing) are
+    checked in ``__post_init__``.
     """
 
-    name: str
-    vertical_angles_deg: tuple[float, ...]
-    azimuth_step_deg: float
-    rotation_hz: float
-    range_noise_std_m: float
-    min_range_m: float
-    max_range_m: float
-    azimuth_offsets_deg: tuple[float, ...] | None = None
-    laser_interval_s: float = 0.0
-    start_azimuth_deg: float = 180.0
-    ring_bias_std_m: float = 0.0
-    angular_jitter_deg: float = 0.0
-    dropout_probability: float = 0.0
-    intensity_range_ref_m: float = 10.0
-    description: str = ""
-    source: str = ""
+    error = SensorError
+    section_name = "sensor"
+
+    name: str = param(help="preset or user name", check=_non_empty)
+    vertical_angles_deg: tuple[float, ...] = param(
+        help="elevation of each laser, in laser-id (firing) order", above=-90.0, below=90.0, check=_distinct)
+    azimuth_step_deg: float = param(help="phi: rotation of the head between two firing columns", above=0.0,
+                                    max=360.0)
+    rotation_hz: float = param(help="spin rate: one sweep lasts 1 / rotation_hz", above=0.0)
+    range_noise_std_m: float = param(help="standard deviation of the Gaussian noise along the beam", min=0.0)
+    min_range_m: float = param(help="returns measured nearer than this are dropped", min=0.0)
+    max_range_m: float = param(help="returns measured farther than this are dropped", above=0.0)
+    azimuth_offsets_deg: tuple[float, ...] | None = param(
+        None, "horizontal offset of each laser, in laser-id order (null: none)")
+    laser_interval_s: float = param(0.0, "time between successive lasers within a column (0: a column fires at "
+                                    "once)", min=0.0)
+    start_azimuth_deg: float = param(180.0, "azimuth of column 0 (180: facing backwards, where KITTI cuts its "
+                                     "scans)")
+    ring_bias_std_m: float = param(0.0, "standard deviation of a fixed per-laser range bias, drawn once per "
+                                   "sensor seed (0: off)", min=0.0)
+    angular_jitter_deg: float = param(0.0, "standard deviation of Gaussian jitter on each beam's elevation and "
+                                      "azimuth (0: off)", min=0.0)
+    dropout_probability: float = param(0.0, "chance that a return is lost (0: off)", min=0.0, below=1.0)
+    intensity_range_ref_m: float = param(10.0, "range beyond which intensity falls off as 1/r^2", above=0.0)
+    description: str = param("", "free text")
+    source: str = param("", "where the figures come from")
 
     def __post_init__(self) -> None:
+        try:
+            super().__post_init__()  # every key against its declaration
+            _check_rules(self)
+        except SensorError as exc:
+            raise exc.at(f"sensor '{self.name}'") from None
         object.__setattr__(self, "vertical_angles_deg", tuple(float(a) for a in self.vertical_angles_deg))
         if self.azimuth_offsets_deg is not None:
-            object.__setattr__(
-                self, "azimuth_offsets_deg", tuple(float(a) for a in self.azimuth_offsets_deg)
-            )
-        _validate(self)
+            object.__setattr__(self, "azimuth_offsets_deg", tuple(float(a) for a in self.azimuth_offsets_deg))
 
     # ---- derived geometry, ring order (ring 0 = lowest beam) ----
     @property
@@ -220,104 +209,71 @@ class LidarModel:
         Path(path).write_text(self.to_yaml())
 
 
-def _validate(m: LidarModel) -> None:
-    def fail(key: str, problem: str) -> None:
-        raise SensorError(f"sensor '{m.name}': key '{key}' {problem}")
-
-    if not isinstance(m.name, str) or not m.name:
-        fail("name", "must be a non-empty string")
-    if m.rings < 1:
-        fail("vertical_angles_deg", "must list at least one angle")
-    angles = np.asarray(m.vertical_angles_deg)
-    if not np.all(np.isfinite(angles)) or np.any(np.abs(angles) >= 90):
-        fail("vertical_angles_deg", "must be finite angles strictly between -90 and 90 degrees")
-    if len(np.unique(angles)) != len(angles):
-        fail("vertical_angles_deg", "has repeated angles; every ring needs its own elevation")
-    if not (m.azimuth_step_deg > 0) or m.azimuth_step_deg > 360:
-        fail("azimuth_step_deg", f"must be in (0, 360], got {m.azimuth_step_deg}")
-    if not (m.rotation_hz > 0):
-        fail("rotation_hz", f"must be > 0, got {m.rotation_hz}")
-    for key in ("range_noise_std_m", "ring_bias_std_m", "angular_jitter_deg", "laser_interval_s"):
-        v = getattr(m, key)
-        if not (np.isfinite(v) and v >= 0):
-            fail(key, f"must be a non-negative number, got {v}")
-    if not (0 <= m.dropout_probability < 1):
-        fail("dropout_probability", f"must be in [0, 1), got {m.dropout_probability}")
-    if not (m.min_range_m >= 0):
-        fail("min_range_m", f"must be >= 0, got {m.min_range_m}")
+def _check_rules(m: LidarModel) -> None:
+    """The rules between keys (each key's own bounds are in its declaration)."""
     if not (m.min_range_m < m.max_range_m):
-        fail("min_range_m", f"must be < max_range_m ({m.min_range_m} >= {m.max_range_m})")
-    if not np.isfinite(m.max_range_m):
-        fail("max_range_m", "must be finite")
-    if not (m.intensity_range_ref_m > 0):
-        fail("intensity_range_ref_m", f"must be > 0, got {m.intensity_range_ref_m}")
+        raise SensorError(f"must be < max_range_m ({m.min_range_m} >= {m.max_range_m})", "min_range_m")
     if m.azimuth_offsets_deg is not None and len(m.azimuth_offsets_deg) != m.rings:
-        fail(
-            "azimuth_offsets_deg",
-            f"has {len(m.azimuth_offsets_deg)} entries but there are {m.rings} rings",
-        )
+        raise SensorError(f"has {len(m.azimuth_offsets_deg)} entries but there are {m.rings} rings",
+                          "azimuth_offsets_deg")
     if (m.rings - 1) * m.laser_interval_s >= m.column_period_s + 1e-12:
-        fail(
-            "laser_interval_s",
-            f"{m.laser_interval_s} s x {m.rings} lasers does not fit in one column "
-            f"({m.column_period_s:.3e} s at this azimuth step and rotation rate)",
-        )
+        raise SensorError(f"is too long: {m.laser_interval_s} s x {m.rings} lasers does not fit in one column "
+                          f"({m.column_period_s:.3e} s at this azimuth step and rotation rate)", "laser_interval_s")
+
+
+def _file_keys() -> Section:
+    """The keys of a sensor YAML file: the model's, with the rings and the uniform-pitch form of the angles."""
+    model = {p.name: p for p in schema(LidarModel).members}
+    angles = dataclasses.replace(model["vertical_angles_deg"], default=None, nullable=True,
+                                 help="elevation of each laser, in laser-id (firing) order (or give "
+                                      "ring_pitch_deg and lowest_angle_deg)")
+    rings = Param("rings", "int", help="number of lasers", min=1)
+    pitch = Param("ring_pitch_deg", "float", None, "uniform elevation step between rings (with "
+                  "lowest_angle_deg, instead of vertical_angles_deg)", "deg", above=0.0, nullable=True)
+    lowest = Param("lowest_angle_deg", "float", None, "elevation of the lowest ring (with ring_pitch_deg)",
+                   "deg", above=-90.0, below=90.0, nullable=True)
+    order = ["name", rings, "azimuth_step_deg", "rotation_hz", "range_noise_std_m", "min_range_m", "max_range_m",
+             angles, pitch, lowest, "azimuth_offsets_deg", "laser_interval_s", "start_azimuth_deg",
+             "ring_bias_std_m", "angular_jitter_deg", "dropout_probability", "intensity_range_ref_m",
+             "description", "source"]
+    members = tuple(model[k] if isinstance(k, str) else k for k in order)
+    return Section("sensor", members, "a spinning lidar's rings, timing, ranges and noise", LidarModel)
+
+
+# The keys of a sensor file (``salo sensors --keys``, docs/parameters.md).
+SENSOR_FILE = _file_keys()
 
 
 def from_dict(data: dict, origin: str = "sensor description") -> LidarModel:
-    """Build a validated ``LidarModel`` from a YAML-style dict.
+    """Build a validated ``LidarModel`` from a YAML-style dict (``SENSOR_FILE``'s keys).
 
     Either ``vertical_angles_deg`` (one per ring) or ``ring_pitch_deg`` +
     ``lowest_angle_deg`` (uniform pitch) must be given together with ``rings``.
-    Errors name ``origin`` (usually the file), the key and the problem.
+    Errors name ``origin`` (usually the file) and the sensor, the key and the problem.
     """
-    if not isinstance(data, dict):
-        raise SensorError(f"{origin}: expected a mapping of sensor keys, got {type(data).__name__}")
-    name = data.get("name", "?")
+    where = f"{origin} (sensor '{data.get('name', '?')}')" if isinstance(data, dict) else origin
+    values = SENSOR_FILE.read(data, where, error=SensorError)
 
-    def fail(key: str, problem: str) -> None:
-        raise SensorError(f"{origin} (sensor '{name}'): key '{key}' {problem}")
+    def fail(key: str, problem: str) -> SensorError:
+        return SensorError(problem, key, where)
 
-    unknown = sorted(set(data) - set(REQUIRED_KEYS) - set(OPTIONAL_KEYS))
-    if unknown:
-        fail(unknown[0], f"is not a sensor key (known: {', '.join(REQUIRED_KEYS + OPTIONAL_KEYS)})")
-    for key in REQUIRED_KEYS:
-        if key not in data:
-            fail(key, "is missing")
-    numeric = [k for k in REQUIRED_KEYS + OPTIONAL_KEYS if k not in ("name", "description", "source")]
-    for key in numeric:
-        if key in data and key not in ("vertical_angles_deg", "azimuth_offsets_deg"):
-            if isinstance(data[key], bool) or not isinstance(data[key], int | float):
-                fail(key, f"must be a number, got {data[key]!r}")
-    rings = data["rings"]
-    if not isinstance(rings, int) or rings < 1:
-        fail("rings", f"must be a positive integer, got {rings!r}")
-    if "vertical_angles_deg" in data:
-        if "ring_pitch_deg" in data or "lowest_angle_deg" in data:
-            fail("ring_pitch_deg", "cannot be given together with vertical_angles_deg")
-        angles = data["vertical_angles_deg"]
-        if not isinstance(angles, list | tuple) or not all(
-            isinstance(a, int | float) and not isinstance(a, bool) for a in angles
-        ):
-            fail("vertical_angles_deg", "must be a list of numbers (degrees)")
+    rings = values.pop("rings")
+    angles = values.pop("vertical_angles_deg", None)
+    pitch, lowest = values.pop("ring_pitch_deg", None), values.pop("lowest_angle_deg", None)
+    if angles is not None:
+        if pitch is not None or lowest is not None:
+            raise fail("ring_pitch_deg", "cannot be given together with vertical_angles_deg")
         if len(angles) != rings:
-            fail("rings", f"is {rings} but vertical_angles_deg lists {len(angles)} angles")
+            raise fail("rings", f"is {rings} but vertical_angles_deg lists {len(angles)} angles")
     else:
-        for key in ("ring_pitch_deg", "lowest_angle_deg"):
-            if key not in data:
-                fail(key, "is missing (give vertical_angles_deg, or ring_pitch_deg and lowest_angle_deg)")
-        if not data["ring_pitch_deg"] > 0:
-            fail("ring_pitch_deg", f"must be > 0, got {data['ring_pitch_deg']}")
-        angles = [data["lowest_angle_deg"] + k * data["ring_pitch_deg"] for k in range(rings)]
-    kwargs = {
-        k: data[k]
-        for k in REQUIRED_KEYS + OPTIONAL_KEYS
-        if k in data and k not in ("rings", "ring_pitch_deg", "lowest_angle_deg", "vertical_angles_deg")
-    }
+        for key, value in (("ring_pitch_deg", pitch), ("lowest_angle_deg", lowest)):
+            if value is None:
+                raise fail(key, "is missing (give vertical_angles_deg, or ring_pitch_deg and lowest_angle_deg)")
+        angles = tuple(lowest + k * pitch for k in range(rings))
     try:
-        return LidarModel(vertical_angles_deg=tuple(angles), **kwargs)
+        return LidarModel(vertical_angles_deg=angles, **values)
     except SensorError as exc:
-        raise SensorError(f"{origin}: {exc}") from None
+        raise exc.at(where) from None
 
 
 def load_sensor_file(path: str | Path) -> LidarModel:

@@ -8,10 +8,14 @@ test_scenes*.py, test_sensor.py and test_sweep_runner.py, keep passing).
 
 from __future__ import annotations
 
+import io
+from contextlib import redirect_stdout
+
 import pytest
 
 import scenes
-from paramspec import help_text, unit_of
+from paramspec import help_text, schema, unit_of
+from simlidar.sensor import SENSOR_FILE, LidarModel, SensorError, from_dict, load_preset, preset_names
 from tools.cli import main
 
 
@@ -49,3 +53,45 @@ def test_scene_errors_name_the_scene_and_key():
     p = scenes.resolve_params("city", streets_x="3", route_blocks=2.0, closed_loop=0, speed_m_s=9)
     assert (p.streets_x, p.route_blocks, p.closed_loop, p.speed_m_s) == (3, 2, False, 9.0)
     assert type(p.speed_m_s) is float
+
+
+# ---------------------------------------------------------------- sensors
+def test_sensor_file_keys_are_the_models_and_the_file_forms():
+    model = set(schema(LidarModel).names)
+    assert model <= set(SENSOR_FILE.names)
+    assert set(SENSOR_FILE.names) - model == {"rings", "ring_pitch_deg", "lowest_angle_deg"}
+    for name in preset_names():  # every preset round-trips through the declared keys
+        m = load_preset(name)
+        assert from_dict(m.to_dict(), origin=name) == m
+
+
+def test_salo_sensors_keys_lists_the_declarations():
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["sensors", "--keys"]) == 0
+    out = buf.getvalue()
+    assert help_text(SENSOR_FILE, header=True) in out
+    assert "rotation_hz" in out and "(0, 360]" in out and "[0, 1)" in out
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["sensors"]) == 0
+    assert "salo32" in buf.getvalue() and "--keys" in buf.getvalue()
+
+
+def test_sensor_errors_keep_their_shape():
+    base = load_preset("vlp16").to_dict()
+    cases = [
+        ({"spin": 3}, "my.yaml (sensor 'vlp16'): key 'spin' is unknown (known: name, rings, azimuth_step_deg,"),
+        ({"rotation_hz": "10"}, "my.yaml (sensor 'vlp16'): key 'rotation_hz' must be a number > 0 (Hz), got '10'"),
+        ({"start_azimuth_deg": None}, "my.yaml (sensor 'vlp16'): key 'start_azimuth_deg' must be a number (deg), "
+                                      "got null"),
+        ({"min_range_m": 200.0}, "my.yaml (sensor 'vlp16'): key 'min_range_m' must be < max_range_m"),
+        ({"description": 3}, "my.yaml (sensor 'vlp16'): key 'description' must be a string, got 3"),
+    ]
+    for change, text in cases:
+        with pytest.raises(SensorError) as err:
+            from_dict({**base, **change}, origin="my.yaml")
+        assert str(err.value).startswith(text)
+    with pytest.raises(SensorError) as err:
+        load_preset("vlp16").with_overrides(range_noise_std_m=-1.0)
+    assert str(err.value) == "sensor 'vlp16': key 'range_noise_std_m' must be a number >= 0 (m), got -1.0"
