@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 from contextlib import redirect_stdout
+from pathlib import Path
 
 import pytest
 
@@ -17,6 +18,9 @@ import scenes
 from paramspec import help_text, schema, unit_of
 from simlidar.sensor import SENSOR_FILE, LidarModel, SensorError, from_dict, load_preset, preset_names
 from tools.cli import main
+from tools.sweep.spec import SpecError, SweepSpec, load_spec, spec_from_dict
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 # ---------------------------------------------------------------- scenes
@@ -95,3 +99,39 @@ def test_sensor_errors_keep_their_shape():
     with pytest.raises(SensorError) as err:
         load_preset("vlp16").with_overrides(range_noise_std_m=-1.0)
     assert str(err.value) == "sensor 'vlp16': key 'range_noise_std_m' must be a number >= 0 (m), got -1.0"
+
+
+# ---------------------------------------------------------------- sweep specs
+def test_sweep_spec_round_trips_and_lists_its_keys(capsys):
+    example = load_spec(REPO / "tools/sweep/examples/noise-study.yaml")
+    assert spec_from_dict(example.to_dict()) == example
+    with_configs = spec_from_dict({"configs": {"v4": {"base": "bl", "voxel_size_m": 0.4}}, "variants": ["v4"]})
+    assert spec_from_dict(with_configs.to_dict()) == with_configs
+    assert schema(SweepSpec).names == tuple(SweepSpec().to_dict())  # every YAML key is declared
+    with pytest.raises(SystemExit):
+        main(["sweep", "--help"])
+    out = capsys.readouterr().out
+    assert help_text(schema(SweepSpec), header=True) in out
+
+
+def test_sweep_spec_errors_come_from_the_declarations():
+    cases = [
+        ({"scene": ["city"]}, "s.yaml: key 'scene' is unknown; did you mean 'scenes'?"),
+        ({"frames": 10.0}, "s.yaml: key 'frames' must be an integer >= 2, got 10.0"),
+        ({"speed_m_s": "8"}, "s.yaml: key 'speed_m_s' must be a number > 0 (m/s) or null, got '8'"),
+        ({"noise_std_m": [0.01, "a"]}, "s.yaml: key 'noise_std_m' has 'a', which is not a number >= 0 (m)"),
+        ({"motion_distortion": None}, "s.yaml: key 'motion_distortion' must be true or false, got null"),
+        ({"scene_params": {"city": {"speed_m_s": 100}}},
+         "s.yaml: key 'scene_params.city.speed_m_s' must be a number in [0.5, 60] (m/s), got 100"),
+    ]
+    for change, text in cases:
+        with pytest.raises(SpecError) as err:
+            spec_from_dict(change, origin="s.yaml")
+        assert str(err.value).startswith(text)
+    # still accepted as before: one value for an axis, nulls for the optional keys
+    spec = spec_from_dict({"seeds": 3, "sensors": "vlp16", "speed_m_s": None, "noise_std_m": None,
+                           "scene_params": None})
+    assert (spec.seeds, spec.sensors, spec.speed_m_s, spec.noise_std_m, spec.scene_params) == ((3,), ("vlp16",),
+                                                                                               None, None, {})
+    with pytest.raises(SpecError, match="key 'frames' must be an integer >= 2, got 1"):
+        SweepSpec(frames=1)  # built directly, validated too

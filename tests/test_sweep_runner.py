@@ -65,7 +65,7 @@ def tiny_sweep(tmp_path_factory):
         ({"variants": ["bl", "icp"]}, "variants", "unknown variant 'icp'"),
         ({"frames": 1}, "frames", ">= 2"),
         ({"speed_m_s": 0}, "speed_m_s", "> 0"),
-        ({"scene_params": {"city": {"streets_x": "many"}}}, "scene_params.city", "streets_x"),
+        ({"scene_params": {"city": {"streets_x": "many"}}}, "scene_params.city.streets_x", "got 'many'"),
         ({"scene_params": {"tunnel": {"length_m": 300}}}, "scene_params.tunnel", "not a scene of this sweep"),
         ({"scene_params": {"city": {"seed": 3}}}, "scene_params.city.seed", "axis"),
         ({"odometry": {"voxel_size": 0.3}}, "odometry", "voxel_size"),

@@ -6,7 +6,9 @@ over ``tools.sweep``: parse, call the library, print.
 
 from __future__ import annotations
 
+import argparse
 import os
+import textwrap
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -22,18 +24,39 @@ def _add_executor_args(p) -> None:
                         "the workers must have this package and see --out on a shared filesystem)")
 
 
+_SPEC_KEYS = "<the spec keys>"
+
+
+class _SpecKeysFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the key table's columns, and makes it from the declarations only when help is shown.
+
+    (``tools.sweep.spec`` loads scipy: building every parser with it would slow ``salo --help``.)
+    """
+
+    def add_text(self, text):
+        if text == _SPEC_KEYS:
+            from paramspec import help_text
+            from tools.sweep.spec import SweepSpec
+
+            text = "spec keys (YAML; every key is optional):\n" + help_text(SweepSpec.schema(), header=True)
+        super().add_text(text)
+
+
 def add_commands(subparsers) -> None:
     """Register ``sweep`` and ``regress`` on the main parser's sub-parsers."""
-    p = subparsers.add_parser(
-        "sweep",
-        help="run a study: scenes x seeds x sensors x noise levels x variants",
-        description="Run every combination of a sweep spec's axes: simulate each sequence once (or reuse it "
+    description = textwrap.fill(
+        "Run every combination of a sweep spec's axes: simulate each sequence once (or reuse it "
         "from the output folder), run each odometry variant on it, evaluate against ground truth. Results: "
         "OUT/results.csv (one row per run: parameters, metrics, timings, versions, error), OUT/runs/KEY/ "
         "(each run's poses, diagnostics and result.json), OUT/summary.md|csv and OUT/plots/SCENE.png "
         "(error against noise per variant). Re-running resumes: finished runs are skipped, half-written "
-        "and failed ones redone. Spec keys: name, scenes, seeds, sensors, noise_std_m, variants, frames, "
-        "speed_m_s, start_s, motion_distortion, scene_params, odometry, configs, commands, keep_sequences.",
+        "and failed ones redone.", width=100)
+    p = subparsers.add_parser(
+        "sweep",
+        help="run a study: scenes x seeds x sensors x noise levels x variants",
+        description=description,
+        epilog=_SPEC_KEYS,
+        formatter_class=_SpecKeysFormatter,
     )
     p.add_argument("spec", type=Path, metavar="SPEC.yaml", help="the sweep spec")
     p.add_argument("--out", type=Path, help="output folder (default out/sweeps/<spec name>)")

@@ -30,12 +30,12 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from odometry.config import VARIANTS, ConfigError, OdometryConfig, config_from_dict, variant
+from paramspec import ParamError, Params, param, schema
 from simlidar.formats.salo import FORMAT_VERSION
 from simlidar.sensor import LidarModel, SensorError, load_sensor
 from simlidar.yaml_file import read_yaml
@@ -47,15 +47,11 @@ DEFAULT_VARIANTS = ("bl", "ncf", "salo")
 DEFAULT_FRAMES = 100
 KEY_LENGTH = 16  # hex digits of sha256: 64 bits, no collision in any sweep a person runs
 
-SPEC_KEYS = (
-    "name", "scenes", "seeds", "sensors", "noise_std_m", "variants", "frames", "speed_m_s", "start_s",
-    "motion_distortion", "scene_params", "odometry", "configs", "commands", "keep_sequences",
-)
 # Placeholders an external odometry command must contain.
 COMMAND_FIELDS = ("{sequence}", "{out}")
 
 
-class SpecError(ValueError):
+class SpecError(ParamError):
     """A sweep spec is invalid; the message names the file and the key."""
 
 
@@ -158,30 +154,47 @@ def _config_changes(config: OdometryConfig) -> dict:
     return {k: v for k, v in full.items() if ref.get(k) != v}
 
 
+def _sweep_name(name: str) -> str | None:
+    return None if name and "/" not in name else f"must be a non-empty string without '/', got {name!r}"
+
+
 @dataclass(frozen=True)
-class SweepSpec:
+class SweepSpec(Params):
     """A validated sweep specification (see the module docstring for the YAML).
 
-    ``noise_std_m`` is None when the spec leaves each sensor's own noise.
-    ``configs`` maps extra variant names to resolved configs; ``commands`` maps
-    external variant names to command templates.
+    Each field is a key of the YAML, declared with its type, unit, bounds and
+    help (``salo sweep --help``, ``docs/parameters.md``). An axis (scenes, seeds,
+    sensors, noise_std_m, variants) may be one value or a list. ``noise_std_m``
+    is None when the spec leaves each sensor's own noise. ``configs`` maps extra
+    variant names to resolved configs; ``commands`` maps external variant names
+    to command templates. ``spec_from_dict`` checks what the keys mean
+    together (known scenes, sensors and variants, per-scene parameters).
     """
 
-    name: str = "sweep"
-    scenes: tuple[str, ...] = DEFAULT_SCENES
-    seeds: tuple[int, ...] = DEFAULT_SEEDS
-    sensors: tuple[str, ...] = DEFAULT_SENSORS
-    noise_std_m: tuple[float, ...] | None = None
-    variants: tuple[str, ...] = DEFAULT_VARIANTS
-    frames: int = DEFAULT_FRAMES
-    speed_m_s: float | None = None
-    start_s: float = 0.0
-    motion_distortion: bool = True
-    scene_params: dict = field(default_factory=dict)
-    odometry: dict = field(default_factory=dict)
-    configs: dict = field(default_factory=dict)
-    commands: dict = field(default_factory=dict)
-    keep_sequences: bool = True
+    error = SpecError
+    section_name = "sweep spec"
+
+    name: str = param("sweep", "the sweep's name (default output folder: out/sweeps/NAME)", check=_sweep_name)
+    scenes: tuple[str, ...] = param(DEFAULT_SCENES, "procedural scenes (`salo scenes`)", one_or_more=True,
+                                    unique=True)
+    seeds: tuple[int, ...] = param(DEFAULT_SEEDS, "seeds: each seeds the scene and the sensor noise", min=0,
+                                   one_or_more=True, unique=True)
+    sensors: tuple[str, ...] = param(DEFAULT_SENSORS, "sensor presets (`salo sensors`) or YAML files, relative "
+                                     "to the spec", one_or_more=True, unique=True)
+    noise_std_m: tuple[float, ...] | None = param(None, "range noise standard deviations (null: each sensor's "
+                                                  "own)", min=0.0, one_or_more=True, unique=True)
+    variants: tuple[str, ...] = param(DEFAULT_VARIANTS, "odometry variants: built-in (bl, ncf, salo, ...), "
+                                      "configs or commands", one_or_more=True, unique=True)
+    frames: int = param(DEFAULT_FRAMES, "sweeps per sequence", min=2)
+    speed_m_s: float | None = param(None, "cruise speed (null: the scene's own)", above=0.0)
+    start_s: float = param(0.0, "time along the path of the first sweep", min=0.0)
+    motion_distortion: bool = param(True, "simulate the sensor's motion during each sweep")
+    scene_params: dict = param({}, "per scene, parameter overrides: {SCENE: {KEY: VALUE}} (`salo scenes NAME`)")
+    odometry: dict = param({}, "odometry parameter overrides for every built-in variant")
+    configs: dict = param({}, "extra variants: {NAME: {base: VARIANT, KEY: VALUE, ...}}")
+    commands: dict = param({}, "external odometries as variants: {NAME: \"command with {sequence} and {out}\"}")
+    keep_sequences: bool = param(True, "keep the simulated sequences for reuse (false: delete each once its "
+                                 "runs are done)")
 
     def to_dict(self) -> dict:
         """The spec as YAML-ready data (configs as their parameter overrides)."""
@@ -240,102 +253,78 @@ def load_spec(path: str | Path) -> SweepSpec:
 
 
 def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path | None = None) -> SweepSpec:
-    """Validate a spec mapping; every error names ``origin`` and the offending key."""
+    """Validate a spec mapping; every error names ``origin`` and the offending key.
 
-    def fail(key: str, problem: str) -> SpecError:
-        return SpecError(f"{origin}: key '{key}': {problem}")
-
-    if not isinstance(data, dict):
-        raise SpecError(f"{origin}: expected a mapping of sweep keys (name, scenes, seeds, ...)")
-    unknown = [k for k in data if k not in SPEC_KEYS]
-    if unknown:
-        raise fail(str(unknown[0]), f"unknown (known keys: {', '.join(SPEC_KEYS)})")
-    get = data.get
-
-    name = get("name", "sweep")
-    if not isinstance(name, str) or not name or "/" in name:
-        raise fail("name", f"must be a non-empty string without '/', got {name!r}")
-
-    scenes = _str_list(get("scenes", list(DEFAULT_SCENES)), "scenes", fail)
+    Each key's type and range come from ``SweepSpec``'s declarations; here the
+    rules that need the scenes, the sensors and the variants.
+    """
     import scenes as scene_lib
 
-    for s in scenes:
-        if s not in scene_lib.SCENES:
-            raise fail("scenes", f"unknown scene {s!r} (known: {', '.join(scene_lib.SCENES)})")
+    def fail(key: str, problem: str) -> SpecError:
+        return SpecError(problem, key, origin)
 
-    seeds = _as_list(get("seeds", list(DEFAULT_SEEDS)), "seeds", fail)
-    for s in seeds:
-        if isinstance(s, bool) or not isinstance(s, int) or s < 0:
-            raise fail("seeds", f"every seed must be an integer >= 0, got {s!r}")
+    v = {**_defaults(), **schema(SweepSpec).read(data, origin, error=SpecError)}
+    for s in v["scenes"]:
+        if s not in scene_lib.SCENES:
+            raise fail("scenes", f"names an unknown scene {s!r} (known: {', '.join(scene_lib.SCENES)})")
 
     sensors = []
-    for s in _str_list(get("sensors", list(DEFAULT_SENSORS)), "sensors", fail):
+    for s in v["sensors"]:
         if s.endswith((".yaml", ".yml")) and base_dir is not None and not Path(s).is_absolute():
             s = str((Path(base_dir) / s).resolve())
         try:
             load_sensor(s)
         except SensorError as exc:
-            raise fail("sensors", str(exc)) from None
+            raise fail("sensors", f"is invalid: {exc}") from None
         sensors.append(s)
     stems = [Path(s).stem for s in sensors]
     if len(set(stems)) != len(stems):
-        raise fail("sensors", "two sensors have the same name (runs are labelled by the file's stem)")
+        raise fail("sensors", "names two sensors alike (runs are labelled by the file's stem)")
+    v["sensors"] = tuple(sensors)
 
-    noise = get("noise_std_m")
-    if noise is not None:
-        noise = _as_list(noise, "noise_std_m", fail)
-        for n in noise:
-            if isinstance(n, bool) or not isinstance(n, int | float) or not math.isfinite(n) or n < 0:
-                raise fail("noise_std_m", f"every level must be a number >= 0 (metres), got {n!r}")
-        noise = tuple(float(n) for n in noise)
+    if v["noise_std_m"] is not None:
+        v["noise_std_m"] = tuple(float(n) for n in v["noise_std_m"])
         for s in sensors:
-            for n in noise:
+            for n in v["noise_std_m"]:
                 try:
                     load_sensor(s).with_overrides(range_noise_std_m=n)
                 except SensorError as exc:
-                    raise fail("noise_std_m", f"{n:g} for sensor {s}: {exc}") from None
+                    raise fail("noise_std_m", f"has {n:g}, invalid for sensor {s}: {exc}") from None
+    speed = v["speed_m_s"]
+    v["speed_m_s"], v["start_s"] = None if speed is None else float(speed), float(v["start_s"])
 
-    frames = get("frames", DEFAULT_FRAMES)
-    if isinstance(frames, bool) or not isinstance(frames, int) or frames < 2:
-        raise fail("frames", f"must be an integer >= 2, got {frames!r}")
-    speed = get("speed_m_s")
-    if speed is not None and (isinstance(speed, bool) or not isinstance(speed, int | float) or not speed > 0):
-        raise fail("speed_m_s", f"must be a number > 0 (m/s), got {speed!r}")
-    start = get("start_s", 0.0)
-    if isinstance(start, bool) or not isinstance(start, int | float) or not math.isfinite(start) or start < 0:
-        raise fail("start_s", f"must be a number >= 0 (s), got {start!r}")
-    for key in ("motion_distortion", "keep_sequences"):
-        if not isinstance(get(key, True), bool):
-            raise fail(key, f"must be true or false, got {get(key)!r}")
-
-    scene_params = _mapping(get("scene_params", {}), "scene_params", fail)
-    for scene, params in scene_params.items():
-        if scene not in scenes:
-            raise fail(f"scene_params.{scene}", f"not a scene of this sweep (scenes: {', '.join(scenes)})")
-        params = _mapping(params, f"scene_params.{scene}", fail)
+    for scene, params in v["scene_params"].items():
+        key = f"scene_params.{scene}"
+        if scene not in v["scenes"]:
+            raise fail(key, f"is not a scene of this sweep (scenes: {', '.join(v['scenes'])})")
+        if params is not None and not (isinstance(params, dict) and all(isinstance(k, str) for k in params)):
+            raise fail(key, f"must be a mapping of names to values, got {type(params).__name__}")
+        params = v["scene_params"][scene] = dict(params or {})
         if "seed" in params:
-            raise fail(f"scene_params.{scene}.seed", "the seed is an axis: use the top-level 'seeds'")
+            raise fail(f"{key}.seed", "is not a scene parameter here: the seed is an axis, use the top-level 'seeds'")
         try:
             scene_lib.resolve_params(scene, 0, **{**params, **({"speed_m_s": speed} if speed else {})})
-        except ValueError as exc:
-            raise fail(f"scene_params.{scene}", str(exc)) from None
+        except ParamError as exc:
+            raise exc.within(key).as_(SpecError).at(origin) from None
 
-    odometry = _mapping(get("odometry", {}), "odometry", fail)
+    odometry = v["odometry"]
     if "name" in odometry:
-        raise fail("odometry.name", "the variant is an axis: use 'variants' (or 'configs' for new ones)")
+        raise fail("odometry.name", "is not an override: the variant is an axis, use 'variants' (or 'configs' for "
+                                    "new ones)")
     try:
         variant("salo").replace(**odometry)
     except (ConfigError, TypeError) as exc:
-        raise fail("odometry", str(exc)) from None
+        raise fail("odometry", f"is invalid: {exc}") from None
 
-    commands = _mapping(get("commands", {}), "commands", fail)
-    for cname, template in commands.items():
+    for cname, template in v["commands"].items():
         if not isinstance(template, str) or not all(f in template for f in COMMAND_FIELDS):
             raise fail(f"commands.{cname}", f"must be a command line with {' and '.join(COMMAND_FIELDS)}, "
                                             f"got {template!r}")
     configs = {}
-    for cname, params in _mapping(get("configs", {}), "configs", fail).items():
-        params = dict(_mapping(params, f"configs.{cname}", fail))
+    for cname, params in v["configs"].items():
+        if params is not None and not isinstance(params, dict):
+            raise fail(f"configs.{cname}", f"must be a mapping of names to values, got {type(params).__name__}")
+        params = dict(params or {})
         base_name = params.pop("base", "salo")
         if base_name not in VARIANTS:
             raise fail(f"configs.{cname}.base", f"must be one of {', '.join(VARIANTS)}, got {base_name!r}")
@@ -343,53 +332,23 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
             configs[cname] = config_from_dict({**odometry, **params, "name": cname}, base=variant(base_name),
                                               origin=f"configs.{cname}")
         except ConfigError as exc:
-            raise fail(f"configs.{cname}", str(exc)) from None
-    clash = set(commands) & (set(configs) | set(VARIANTS)) or set(configs) & set(VARIANTS)
+            raise fail(f"configs.{cname}", f"is invalid: {exc}") from None
+    clash = set(v["commands"]) & (set(configs) | set(VARIANTS)) or set(configs) & set(VARIANTS)
     if clash:
         raise fail("configs" if set(configs) & set(VARIANTS) else "commands",
-                   f"name {sorted(clash)[0]!r} is already a variant")
+                   f"names {sorted(clash)[0]!r}, which is already a variant")
+    v["configs"] = configs
 
-    variants = _str_list(get("variants", list(DEFAULT_VARIANTS)), "variants", fail)
-    known = [*VARIANTS, *configs, *commands]
-    for v in variants:
-        if v not in known:
-            raise fail("variants", f"unknown variant {v!r} (known: {', '.join(known)})")
-
-    for key, values in (("scenes", scenes), ("seeds", seeds), ("sensors", sensors), ("variants", variants),
-                        ("noise_std_m", noise or ())):
-        if len(set(values)) != len(values):
-            raise fail(key, "lists a value twice")
-    return SweepSpec(
-        name=name, scenes=tuple(scenes), seeds=tuple(seeds), sensors=tuple(sensors), noise_std_m=noise,
-        variants=tuple(variants), frames=frames, speed_m_s=None if speed is None else float(speed),
-        start_s=float(start), motion_distortion=get("motion_distortion", True),
-        scene_params={k: dict(v) for k, v in scene_params.items()}, odometry=dict(odometry), configs=configs,
-        commands=dict(commands), keep_sequences=get("keep_sequences", True),
-    )
+    known = [*VARIANTS, *configs, *v["commands"]]
+    for name in v["variants"]:
+        if name not in known:
+            raise fail("variants", f"names an unknown variant {name!r} (known: {', '.join(known)})")
+    return SweepSpec(**v)
 
 
-def _as_list(value: Any, key: str, fail) -> list:
-    """A scalar becomes a one-element axis; an empty list is an error (an empty sweep)."""
-    values = value if isinstance(value, list | tuple) else [value]
-    if not values:
-        raise fail(key, "is empty (leave the key out for its default)")
-    return list(values)
-
-
-def _str_list(value: Any, key: str, fail) -> list[str]:
-    values = _as_list(value, key, fail)
-    for v in values:
-        if not isinstance(v, str) or not v:
-            raise fail(key, f"every entry must be a non-empty string, got {v!r}")
-    return values
-
-
-def _mapping(value: Any, key: str, fail) -> dict:
-    if value is None:
-        return {}
-    if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
-        raise fail(key, f"must be a mapping of names to values, got {type(value).__name__}")
-    return value
+def _defaults() -> dict:
+    """The declared defaults (the mappings copied: the declaration's own stay empty)."""
+    return {p.name: dict(p.default) if isinstance(p.default, dict) else p.default for p in schema(SweepSpec).members}
 
 
 __all__ = ["RunParams", "SimParams", "SpecError", "SweepSpec", "load_spec", "spec_from_dict", "stable_hash"]
