@@ -16,8 +16,10 @@ import pytest
 
 import scenes
 from paramspec import help_text, schema, unit_of
+from scenes.params import CommonParams
 from simlidar.sensor import SENSOR_FILE, LidarModel, SensorError, from_dict, load_preset, preset_names
 from tools.cli import main
+from tools.docs import PAGE, parameters_page
 from tools.sweep.spec import SpecError, SweepSpec, load_spec, spec_from_dict
 
 REPO = Path(__file__).resolve().parents[1]
@@ -135,3 +137,13 @@ def test_sweep_spec_errors_come_from_the_declarations():
                                                                                                None, None, {})
     with pytest.raises(SpecError, match="key 'frames' must be an integer >= 2, got 1"):
         SweepSpec(frames=1)  # built directly, validated too
+
+
+# ---------------------------------------------------------------- the page
+def test_the_parameters_page_is_what_the_declarations_make():
+    assert PAGE.read_text() == parameters_page(), "docs/parameters.md is out of date: run python -m tools.docs"
+    page = parameters_page()
+    for name in scenes.SCENES:
+        assert f"### {name}" in page
+    for key in (*SENSOR_FILE.names, *schema(SweepSpec).names, *schema(CommonParams).names):
+        assert f"| `{key}` |" in page, key
