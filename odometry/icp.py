@@ -178,6 +178,7 @@ def register(
     config: OdometryConfig,
     rejectors: Sequence[Rejector] | None = None,
     T_target_previous: np.ndarray | None = None,
+    motion_prior: bool = True,
 ) -> RegistrationResult:
     """Alg. 1's loop: estimate ``T_target_source`` starting from ``T_init`` (4, 4).
 
@@ -191,6 +192,8 @@ def register(
     (a map's origin can be hundreds of metres away, where a small rotation is a
     large translation); with ``min_constraint_eigenvalue`` the directions the
     matches constrain too weakly keep ``T_init``'s value (``odometry.constraints``).
+    ``motion_prior=False``: ``T_init`` is no prediction (the first registration of a sequence
+    starts from a guess, not from a known motion), so no direction is held to it.
     """
     rejectors = rejectors_for(config) if rejectors is None else rejectors
     T = np.array(T_init, dtype=float)
@@ -225,13 +228,14 @@ def register(
             res.singular = True
             break
         deviation = None
-        if config.weak_direction_update == "prior" and config.min_constraint_eigenvalue > 0:
+        min_eigenvalue = config.min_constraint_eigenvalue if motion_prior else 0.0
+        if config.weak_direction_update == "prior" and min_eigenvalue > 0:
             # the estimate's offset from the prior (T_init), as a twist about the centre
             E = T @ se3.inverse(T_init)
             E[:3, 3] += E[:3, :3] @ centre - centre
             deviation = se3.log(E)
         step = point_to_plane_step(moved[m.source_index] - centre, target.points[m.target_index] - centre,
-                                   target.normals_at(m.target_index), min_eigenvalue=config.min_constraint_eigenvalue,
+                                   target.normals_at(m.target_index), min_eigenvalue=min_eigenvalue,
                                    rotation_scale_m=config.rotation_scale_m, mode=config.weak_direction_update,
                                    deviation=deviation)
         seconds["estimate"] += time.perf_counter() - t2

@@ -387,21 +387,22 @@ class Odometry:
         target = self._target()
         source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
         T_init = T_target_prev @ T_guess
-        icp_seconds, icp_iterations = {}, 0
+        prior = not first  # the first registration starts from a guess, not from a known motion
         if first:
             # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
             # the correspondence bound, and the points that see it (few, in a corridor) would be
             # trimmed first. A coarse registration with a wide bound and no trimming comes first.
             coarse = register(source, target, T_init, cfg.replace(
                 max_correspondence_distance_m=cfg.initial_correspondence_distance_m, trim_fraction=0.0),
-                self._chain_coarse, T_target_prev)
-            icp_seconds, icp_iterations = dict(coarse.seconds), coarse.iterations
+                self._chain_coarse, T_target_prev, motion_prior=False)
             if not coarse.singular:
                 T_init = coarse.T_target_source
-        result = register(source, target, T_init, cfg, chain, T_target_prev)
-        for stage, spent in result.seconds.items():
-            icp_seconds[stage] = icp_seconds.get(stage, 0.0) + spent
-        icp_iterations += result.iterations
+        result = register(source, target, T_init, cfg, chain, T_target_prev, prior)
+        icp_seconds, icp_iterations = dict(result.seconds), result.iterations
+        if first:
+            for stage, spent in coarse.seconds.items():
+                icp_seconds[stage] += spent
+            icp_iterations += coarse.iterations
         T_deskew = T_guess
 
         def motion_of(T_target_cur: np.ndarray) -> np.ndarray:
@@ -433,7 +434,7 @@ class Odometry:
             # The GCR thresholds scale with range and incidence, which a re-de-skew by a
             # few centimetres does not change: they are reused.
             source = Source(scan.points, scan.normals, source.gcr_threshold_m)
-            refined = register(source, target, result.T_target_source, cfg, chain, T_target_prev)
+            refined = register(source, target, result.T_target_source, cfg, chain, T_target_prev, prior)
             for stage, spent in refined.seconds.items():  # stage times and iterations cover every registration
                 icp_seconds[stage] += spent
             icp_iterations += refined.iterations
