@@ -183,10 +183,13 @@ class Param:
         """``value`` checked against the declaration (a list becomes a tuple).
 
         ``coerce``: ``value`` may be command-line text or loosely typed ('250'
-        and 250.0 for an int, 'yes' and 1 for a bool, 250 -> 250.0 for a float);
+        and 250.0 for an int, 'yes' and 1 for a bool, 250 -> 250.0 for a float,
+        'null' for null where null is a value);
         otherwise it must have the key's type (an int is a number; a number is
         kept as given). Raises ``ParamError`` naming this key.
         """
+        if coerce and self.nullable and isinstance(value, str) and value.strip() == "null":
+            value = None  # command-line text: YAML's null
         if value is None:
             if self.nullable:
                 return None
@@ -291,7 +294,10 @@ def _in_bounds(p: Param, v: float) -> bool:
 # ---------------------------------------------------------------- a group of keys
 @dataclass(frozen=True)
 class Section:
-    """A named group of keys and nested sections; ``cls``: the ``Params`` class it builds, if any."""
+    """A named group of keys and nested sections; ``cls``: the ``Params`` class it builds, if any.
+
+    A section's on/off switch is, by convention, its bool key ``enabled``.
+    """
 
     name: str
     members: tuple[Param | Section, ...]
@@ -339,7 +345,9 @@ class Section:
             raise ParamError(f"expected a mapping of {self.name} keys, got {type(data).__name__}")
         for key in data:
             if key not in self.names:
-                raise ParamError(unknown(str(key), self.names), str(key))
+                moved = self.moved(str(key))
+                raise ParamError(f"is unknown; did you mean '{moved}'?" if moved else unknown(str(key), self.names),
+                                 str(key))
         for m in self.members:
             if isinstance(m, Param) and m.required and m.name not in data and not partial:
                 raise ParamError(f"is missing ({m.help})" if m.help else "is missing", m.name)
@@ -348,7 +356,7 @@ class Section:
             m = self[key]
             if isinstance(m, Section):
                 if value is not None and not isinstance(value, Mapping):
-                    raise ParamError(f"must be a mapping of {m.name} keys, got {type(value).__name__}", key)
+                    raise ParamError(m.not_a_mapping(value), key)
                 try:
                     out[key] = m._read(value or {}, coerce, partial)
                 except ParamError as exc:
@@ -356,6 +364,31 @@ class Section:
             else:
                 out[key] = m.convert(value, coerce)
         return out
+
+
+    def moved(self, key: str) -> str | None:
+        """The dotted name of the nested key that ``key``, unknown here, most likely means, or None.
+
+        A key that moved into a section: one whose own name is ``key``
+        (``voxel_size_m`` -> ``filter.voxel_size_m``), or whose section's name,
+        '_' and own name make ``key`` (``match_target`` -> ``match.target``); the
+        first in declaration order. (A single value given for a section with an
+        ``enabled`` switch, ``ncf: false``, is pointed at it: ``not_a_mapping``.)
+        """
+        for name, m in self.walk():
+            section, _, leaf = name.rpartition(".")
+            if section and isinstance(m, Param) and key in (leaf, f"{section.rpartition('.')[2]}_{leaf}"):
+                return name
+        return None
+
+    def not_a_mapping(self, value: Any) -> str:
+        """The problem of a single value given for this section (pointing at its switch, if it has one)."""
+        hint = f"; did you mean '{self.name}.enabled'?" if _switch(self) else ""
+        return f"must be a mapping of {self.name} keys, got {type(value).__name__}{hint}"
+
+
+def _switch(sec: Section) -> bool:
+    return "enabled" in sec.names and getattr(sec["enabled"], "type", None) == "bool"
 
 
 def unknown(key: str, names: Iterable[str]) -> str:
@@ -511,7 +544,7 @@ def check(obj: Any) -> None:
                 except ParamError as exc:
                     raise exc.within(m.name) from None
             else:
-                raise ParamError(f"must be a mapping of {m.name} keys, got {type(value).__name__}", m.name)
+                raise ParamError(m.not_a_mapping(value), m.name)
         except ParamError as exc:
             raise exc.as_(error) from None
         if new is not value:

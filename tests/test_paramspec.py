@@ -148,6 +148,29 @@ def test_assignments_nest_dotted_keys():
     assert "frames is a key, not a section" in error(assignments, ["frames=1", "frames.x=2"])
 
 
+def test_a_key_moved_into_a_section_is_named_with_its_new_dotted_key():
+    """Keys of an older, flat layout: the key of the same name in a section, or the section's name + '_' + key."""
+    cases = [
+        ({"max_normal_std_deg": 3}, "key 'max_normal_std_deg' is unknown; did you mean 'stage.max_normal_std_deg'?"),
+        ({"stage_model": "range"}, "key 'stage_model' is unknown; did you mean 'stage.model'?"),
+        ({"stage_max_normal_std_deg": 3}, "key 'stage_max_normal_std_deg' is unknown; did you mean "
+                                          "'stage.max_normal_std_deg'?"),
+        ({"stage": False}, "key 'stage' must be a mapping of stage keys, got bool; did you mean 'stage.enabled'?"),
+        ({"stage": "no"}, "key 'stage' must be a mapping of stage keys, got str; did you mean 'stage.enabled'?"),
+    ]
+    for data, text in cases:
+        assert error(Demo.from_dict, {"name": "a", **data}, "--set", coerce=True) == f"--set: {text}"
+    assert error(Demo.from_dict, {"stage": {"stage": 1}}, base=Demo(name="a")).startswith(
+        "key 'stage.stage' is unknown (known: enabled,")  # the hint looks below the section, not above
+
+
+def test_null_is_a_value_in_command_line_text_where_the_key_allows_it():
+    assert Demo.from_dict(assignments(["speed_m_s=null"]), coerce=True, base=Demo(name="a", speed_m_s=30)).speed_m_s \
+        is None
+    assert error(Demo.from_dict, {"name": "a", "frames": "null"}, coerce=True) == (
+        "key 'frames' must be an integer in [2, 1000], got 'null'")
+
+
 # ---------------------------------------------------------------- every error path
 @pytest.mark.parametrize(
     ("data", "text"),
@@ -199,7 +222,8 @@ def test_errors_outside_a_file_and_as_another_class():
     assert error(Demo, name="a", frames=1) == "key 'frames' must be an integer in [2, 1000], got 1"
     assert error(Demo, name="a", stage=Stage(), seeds=(-1,)) == "key 'seeds' has -1, which is not an integer >= 0"
     assert error(Demo, name="a", stage={"model": "x"}) == "key 'stage.model' must be one of range, isotropic, got 'x'"
-    assert error(Demo, name="a", stage=3) == "key 'stage' must be a mapping of stage keys, got int"
+    assert error(Demo, name="a", stage=3) == ("key 'stage' must be a mapping of stage keys, got int; "
+                                              "did you mean 'stage.enabled'?")
     assert error(Demo.from_dict, [1], "d.yaml") == "d.yaml: expected a mapping of demo keys, got list"
     e = ParamError("must be > 0", "x", "f.yaml")
     assert str(e.within("stage")) == "f.yaml: key 'stage.x' must be > 0"
