@@ -5,7 +5,7 @@ point-to-plane residual by ``n . rho + (p x n) . omega``: the row
 ``J = [n, p x n]``. The information of a set of points is ``H = sum J^T J``
 (6 x 6); a direction u of motion is constrained by ``u^T H u``. Translation (m)
 and rotation (rad) differ in unit, so directions are compared in scaled
-coordinates ``(rho, L omega)`` with a length L (``rotation_scale_m``, about the
+coordinates ``(rho, L omega)`` with a length L (``degeneracy.rotation_scale_m``, about the
 distance of the points that constrain rotation): the rows become
 ``[n, (p x n) / L]``, dimensionless, and ``H / N`` (per point) has eigenvalues
 in [0, 1] for the translation part: a direction with eigenvalue 1/3 is as well

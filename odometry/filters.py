@@ -102,12 +102,12 @@ class FilteredScan:
 
 def ncf_noise_model(config: OdometryConfig, sensor_range_noise_std_m: float | None):
     """The NCF's noise model from the config (the sensor's range noise when not overridden)."""
-    if config.ncf_noise_model == "isotropic":
-        return IsotropicNoise(point_noise_std_m=config.ncf_point_noise_std_m)
-    sigma = config.ncf_range_noise_std_m or sensor_range_noise_std_m
+    if config.ncf.noise_model == "isotropic":
+        return IsotropicNoise(point_noise_std_m=config.ncf.point_noise_std_m)
+    sigma = config.ncf.range_noise_std_m or sensor_range_noise_std_m
     if not sigma:
         raise ValueError(
-            "the range-noise NCF needs a noise level: give a sensor (--sensor) or set ncf_range_noise_std_m"
+            "the range-noise NCF needs a noise level: give a sensor (--sensor) or set ncf.range_noise_std_m"
         )
     return RangeNoise(range_noise_std_m=sigma)
 
@@ -116,7 +116,7 @@ def scan_normals_needed(config: OdometryConfig) -> bool:
     """Whether the scan's own normals are used: by the cost (scan-to-scan: the scan is the next
     target), or by the NCF on the scan. Registered against a map, the cost and the GCR use the
     map's normals, and the scan's points need none."""
-    return config.match_target != "map" or (config.ncf and config.ncf_applies_to in ("scan", "both"))
+    return config.match.target != "map" or (config.ncf.enabled and config.ncf.applies_to in ("scan", "both"))
 
 
 def filter_scan(
@@ -134,8 +134,8 @@ def filter_scan(
     seconds: dict[str, float] = {}
     t = time.perf_counter()
     if not scan_normals_needed(config):
-        centroids, centroid_times = (voxel_centroids(raw_points, config.voxel_size_m), None) \
-            if raw_times_s is None else voxel_centroids(raw_points, config.voxel_size_m, raw_times_s)
+        centroids, centroid_times = (voxel_centroids(raw_points, config.filter.voxel_size_m), None) \
+            if raw_times_s is None else voxel_centroids(raw_points, config.filter.voxel_size_m, raw_times_s)
         seconds["voxel"] = time.perf_counter() - t
         n = len(centroids)
         return FilteredScan(centroids, np.full((n, 3), np.nan), None, centroid_times, np.full(n, np.nan),
@@ -145,15 +145,15 @@ def filter_scan(
     # computes the voxel grid: both release the GIL, and the two take about as long.
     building = background().submit(cKDTree, raw_points, balanced_tree=False, compact_nodes=False)
     if raw_times_s is None:
-        centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m), None
+        centroids, centroid_times = voxel_centroids(raw_points, config.filter.voxel_size_m), None
     else:
-        centroids, centroid_times = voxel_centroids(raw_points, config.voxel_size_m, raw_times_s)
+        centroids, centroid_times = voxel_centroids(raw_points, config.filter.voxel_size_m, raw_times_s)
     tree = building.result()
     seconds["voxel"] = time.perf_counter() - t
     counts = {"raw": len(raw_points), "voxels": len(centroids)}
 
     t = time.perf_counter()
-    k = min(config.normal_neighbours, len(raw_points))
+    k = min(config.filter.normal_neighbours, len(raw_points))
     if k < 3:
         empty = np.zeros((0, 3))
         return FilteredScan(empty, empty, None, None, np.zeros(0), raw_points, tree, centroids, centroid_times,
@@ -164,21 +164,22 @@ def filter_scan(
     t = time.perf_counter()
     keep = np.ones(len(centroids), dtype=bool)
     normal_std = np.full(len(centroids), np.nan)
-    if config.ncf and config.ncf_applies_to in ("scan", "both"):
+    if config.ncf.enabled and config.ncf.applies_to in ("scan", "both"):
         noise = ncf_noise_model(config, sensor_range_noise_std_m)
         keep, cov = normal_covariance_filter(
             raw_points[est.neighbour_indices], noise,
-            c_tau_rad2=math.radians(config.ncf_max_normal_std_deg) ** 2, pca=est,
-            noise_free_gaps=config.ncf_noise_free_gaps,
+            c_tau_rad2=math.radians(config.ncf.max_normal_std_deg) ** 2, pca=est,
+            noise_free_gaps=config.ncf.noise_free_gaps,
         )
         normal_std = cov.max_std_rad
     counts["ncf"] = int(keep.sum())
-    flat = curvature_keep(est.curvature, config.max_curvature)
+    flat = curvature_keep(est.curvature, config.filter.max_curvature)
     keep &= flat
-    if config.ncf and config.ncf_applies_to in ("scan", "both") and config.min_constraint_eigenvalue > 0:
+    weak = config.degeneracy
+    if config.ncf.enabled and config.ncf.applies_to in ("scan", "both") and weak.min_constraint_eigenvalue > 0:
         # the NCF may not take away the last evidence of a direction of motion
-        guarded = restore_constraints(centroids, est.normals, flat, keep, config.min_constraint_eigenvalue,
-                                      config.rotation_scale_m)
+        guarded = restore_constraints(centroids, est.normals, flat, keep, weak.min_constraint_eigenvalue,
+                                      weak.rotation_scale_m)
         counts["restored"] = int((guarded & ~keep).sum())
         keep = guarded
     counts["curvature"] = int(keep.sum())

@@ -110,11 +110,11 @@ class RegistrationResult:
 
 def rejectors_for(config: OdometryConfig) -> list[Rejector]:
     """The rejection chain of a config: distance, GCR (when on), then trimming."""
-    chain = [distance_rejector(config.max_correspondence_distance_m)]
-    if config.gcr:
+    chain = [distance_rejector(config.match.max_correspondence_distance_m)]
+    if config.gcr.enabled:
         chain.append(geometric_rejector())
-    if config.trim_fraction > 0:
-        chain.append(trimmed_rejector(config.trim_fraction))
+    if config.match.trim_fraction > 0:
+        chain.append(trimmed_rejector(config.match.trim_fraction))
     return chain
 
 
@@ -133,13 +133,13 @@ def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndar
     neighbourhood is no plane: those matches are dropped. A map's normals the NCF
     found too uncertain are dropped too, unless they are the last evidence of a
     direction (``odometry.constraints.restore_constraints``, with
-    ``min_constraint_eigenvalue``). A target with fixed normals passes every match.
+    ``degeneracy.min_constraint_eigenvalue``). A target with fixed normals passes every match.
 
     Args:
         m: the candidate matches. target: what they index into.
         moved: (M, 3) the source points at the current pose, target frame, m.
         centre: (3,) the point the constraints are taken about (the previous sensor position), m.
-        config: ``min_constraint_eigenvalue`` and ``rotation_scale_m``.
+        config: its ``degeneracy`` section (``min_constraint_eigenvalue``, ``rotation_scale_m``).
 
     Returns:
         The kept matches and their counts: {"plane": with a plane, "ncf": of those NCF-sure,
@@ -152,10 +152,10 @@ def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndar
     if target.uncertain is not None:
         sure = ~target.uncertain[m.target_index]
         keep = sure
-        if config.min_constraint_eigenvalue > 0 and not sure.all():
+        if config.degeneracy.min_constraint_eigenvalue > 0 and not sure.all():
             keep = restore_constraints(moved[m.source_index] - centre, target.normals_at(m.target_index),
-                                       np.ones(len(m), dtype=bool), sure, config.min_constraint_eigenvalue,
-                                       config.rotation_scale_m)
+                                       np.ones(len(m), dtype=bool), sure, config.degeneracy.min_constraint_eigenvalue,
+                                       config.degeneracy.rotation_scale_m)
         counts["ncf"] = int(sure.sum())
         counts["restored"] = int((keep & ~sure).sum())
         m = m.select(keep)
@@ -165,9 +165,9 @@ def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndar
 def converged(xi: np.ndarray, T: np.ndarray, config: OdometryConfig) -> bool:
     """Absolute and relative thresholds on the increment ``xi`` (rho m, omega rad)."""
     dt, dr = np.linalg.norm(xi[:3]), np.linalg.norm(xi[3:])
-    abs_t, abs_r = config.abs_translation_tol_m, math.radians(config.abs_rotation_tol_deg)
-    rel_t = config.rel_tolerance * np.linalg.norm(T[:3, 3])
-    rel_r = config.rel_tolerance * float(se3.rotation_angle(T))
+    abs_t, abs_r = config.icp.abs_translation_tol_m, math.radians(config.icp.abs_rotation_tol_deg)
+    rel_t = config.icp.rel_tolerance * np.linalg.norm(T[:3, 3])
+    rel_r = config.icp.rel_tolerance * float(se3.rotation_angle(T))
     return bool(dt < max(abs_t, rel_t) and dr < max(abs_r, rel_r))
 
 
@@ -190,7 +190,7 @@ def register(
     corner) are dropped before the rejectors. The steps are linearised about the
     previous sensor position in the target frame, not the target frame's origin
     (a map's origin can be hundreds of metres away, where a small rotation is a
-    large translation); with ``min_constraint_eigenvalue`` the directions the
+    large translation); with ``degeneracy.min_constraint_eigenvalue`` the directions the
     matches constrain too weakly keep ``T_init``'s value (``odometry.constraints``).
     ``motion_prior=False``: ``T_init`` is no prediction (the first registration of a sequence
     starts from a guess, not from a known motion), so no direction is held to it.
@@ -201,8 +201,8 @@ def register(
     res = RegistrationResult(T_target_source=T.copy())
     seconds = {"match": 0.0, "reject": 0.0, "estimate": 0.0}
     # The distance rejector's bound also limits the k-d tree search.
-    bound = config.max_correspondence_distance_m
-    for it in range(1, config.max_iterations + 1):
+    bound = config.match.max_correspondence_distance_m
+    for it in range(1, config.icp.max_iterations + 1):
         t0 = time.perf_counter()
         moved = source.points @ T[:3, :3].T + T[:3, 3]
         m = match(moved, target, bound)
@@ -224,20 +224,20 @@ def register(
         seconds["reject"] += t2 - t1
         res.matches = counts
         res.n_matches = len(m)
-        if len(m) < config.min_points:
+        if len(m) < config.filter.min_points:
             res.singular = True
             break
         deviation = None
-        min_eigenvalue = config.min_constraint_eigenvalue if motion_prior else 0.0
-        if config.weak_direction_update == "prior" and min_eigenvalue > 0:
+        min_eigenvalue = config.degeneracy.min_constraint_eigenvalue if motion_prior else 0.0
+        if config.degeneracy.weak_direction_update == "prior" and min_eigenvalue > 0:
             # the estimate's offset from the prior (T_init), as a twist about the centre
             E = T @ se3.inverse(T_init)
             E[:3, 3] += E[:3, :3] @ centre - centre
             deviation = se3.log(E)
         step = point_to_plane_step(moved[m.source_index] - centre, target.points[m.target_index] - centre,
                                    target.normals_at(m.target_index), min_eigenvalue=min_eigenvalue,
-                                   rotation_scale_m=config.rotation_scale_m, mode=config.weak_direction_update,
-                                   deviation=deviation)
+                                   rotation_scale_m=config.degeneracy.rotation_scale_m,
+                                   mode=config.degeneracy.weak_direction_update, deviation=deviation)
         seconds["estimate"] += time.perf_counter() - t2
         res.iterations, res.rms_m, res.H, res.remapped = it, step.rms_m, step.H, step.remapped
         if step.rank < 6:
@@ -258,5 +258,5 @@ def register(
         n = max(res.n_matches, 1)
         res.info_eigenvalues = np.linalg.eigvalsh(res.H / n)
         res.translation_eigenvalues, res.weakest_direction = weakest_translation(res.H, n)
-        res.degenerate = bool(res.translation_eigenvalues[0] < config.degenerate_eigenvalue)
+        res.degenerate = bool(res.translation_eigenvalues[0] < config.degeneracy.degenerate_eigenvalue)
     return res

@@ -133,11 +133,11 @@ def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray
     finite = np.all(np.isfinite(points), axis=1)
     safe = np.where(finite[:, None], points, 0.0)
     r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
-    keep = finite & (r >= config.min_range_m) & (r <= config.max_range_m)
+    keep = finite & (r >= config.clean.min_range_m) & (r <= config.clean.max_range_m)
     out = CleanScan(points[keep], None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep],
                     None if rings is None else np.asarray(rings)[keep], np.flatnonzero(keep))
-    if config.kitti_vertical_correction_deg:
-        out.points = correct_kitti_vertical_angle(out.points, config.kitti_vertical_correction_deg)
+    if config.clean.kitti_vertical_correction_deg:
+        out.points = correct_kitti_vertical_angle(out.points, config.clean.kitti_vertical_correction_deg)
     if diag is not None:
         diag.points_raw, diag.points_nonfinite = len(points), int((~finite).sum())
         diag.points_in_range = len(out.points)
@@ -154,20 +154,20 @@ def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel |
 
     Against a map, a true match is as far as the map's point spacing allows, not as far as
     the sensor's: near the sensor a scan samples surfaces more densely than a map of voxels
-    holding at most ``map_points_per_voxel`` points (the rejector study measured true matches
+    holding at most ``map.points_per_voxel`` points (the rejector study measured true matches
     9 cm from the map at every range, where GCR's own bound is 10-12 cm within 20 m and
     rejected a third of them). The threshold is then at least the map's spacing,
-    ``map_voxel_size_m / sqrt(map_points_per_voxel)`` (``map_point_spacing_m``).
+    ``map.voxel_size_m / sqrt(map.points_per_voxel)`` (``map_point_spacing_m``).
     """
     if not with_gcr:
         return Source(scan.points, scan.normals)
     rings = scan.rings if scan.rings is not None else ring_of_points(scan.points, sensor)
-    floor = config.gcr_noise_floor_m
-    if config.match_target == "map":
+    floor = config.gcr.noise_floor_m
+    if config.match.target == "map":
         floor = max(floor, map_point_spacing_m(config))
 
     def thresholds(points: np.ndarray, normals: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        thr = gcr_threshold_m(points, normals, rings[rows], sensor, config.gcr_formula, floor)
+        thr = gcr_threshold_m(points, normals, rings[rows], sensor, config.gcr.formula, floor)
         thr[np.isnan(thr)] = np.inf  # no neighbour beam (or no normal) to bound the match: keep it
         return thr
 
@@ -178,18 +178,18 @@ def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel |
 
 def map_point_spacing_m(config: OdometryConfig) -> float:
     """The spacing of a full map voxel's points on a surface through it, m: ``v / sqrt(n)``."""
-    return config.map_voxel_size_m / math.sqrt(config.map_points_per_voxel)
+    return config.map.voxel_size_m / math.sqrt(config.map.points_per_voxel)
 
 
 def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
     """A scan as the target of scan-to-scan registration (its own frame).
 
-    ``match_target: filtered``: the filtered points and their normals (Alg. 1);
+    ``match.target: filtered``: the filtered points and their normals (Alg. 1);
     ``raw``: every de-skewed raw point, normals estimated where matched.
     """
-    if config.match_target == "filtered":
+    if config.match.target == "filtered":
         return Target(scan.points, cKDTree(scan.points), scan.normals)
-    raw, tree, k = scan.raw_points, scan.raw_tree, config.normal_neighbours
+    raw, tree, k = scan.raw_points, scan.raw_tree, config.filter.normal_neighbours
 
     def normals_of(rows: np.ndarray) -> tuple[np.ndarray, None]:
         return estimate_normals(raw, k=k, query_points=raw[rows], tree=tree).normals, None
@@ -199,12 +199,12 @@ def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
 
 def new_local_map(config: OdometryConfig, sensor: LidarModel | None) -> LocalMap:
     """An empty local map with the config's parameters (noise: the sensor's range sigma, else 2 cm)."""
-    noise = config.ncf_range_noise_std_m or (sensor.range_noise_std_m if sensor is not None else None) or 0.02
-    c_tau = (math.radians(config.ncf_max_normal_std_deg) ** 2
-             if config.ncf and config.ncf_applies_to in ("map", "both") else None)
-    return LocalMap(config.map_voxel_size_m, config.map_points_per_voxel,
-                    config.map_max_distance_m or config.max_range_m, config.normal_neighbours, noise,
-                    config.max_curvature, c_tau)
+    noise = config.ncf.range_noise_std_m or (sensor.range_noise_std_m if sensor is not None else None) or 0.02
+    c_tau = (math.radians(config.ncf.max_normal_std_deg) ** 2
+             if config.ncf.enabled and config.ncf.applies_to in ("map", "both") else None)
+    return LocalMap(config.map.voxel_size_m, config.map.points_per_voxel,
+                    config.map.max_distance_m or config.clean.max_range_m, config.filter.normal_neighbours, noise,
+                    config.filter.max_curvature, c_tau)
 
 
 def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:
@@ -233,7 +233,7 @@ class OdometryState:
     target_scan: the last scan that had points (scan-to-scan target; and the first
         scan until the first registration, for the cold start).
     target_frame: its frame index. target_motion: the motion its points are de-skewed with.
-    local_map: the map of recent scans (``match_target: map``), else None.
+    local_map: the map of recent scans (``match.target: map``), else None.
     """
 
     poses: list[np.ndarray] = field(default_factory=list)
@@ -270,20 +270,22 @@ class Odometry:
     """
 
     def __init__(self, config: OdometryConfig, sensor: LidarModel | None = None):
-        if config.gcr and sensor is None:
+        if config.gcr.enabled and sensor is None:
             raise OdometryError(
                 f"variant '{config.name}' uses the geometric correspondence rejector, which needs the "
                 "sensor's ring table: pass --sensor PRESET|FILE (or use a sequence folder with sensor.yaml)"
             )
         self.config = config
         self.sensor = sensor
-        self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match_target == "map" else None)
+        self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None)
         self.diagnostics: list[FrameDiagnostics] = []
         # The rejection chains, built once: with GCR, and without (the first registration)
         self._chain_with_gcr = rejectors_for(config)
-        self._chain_without_gcr = rejectors_for(config.replace(gcr=False))
-        self._chain_coarse = rejectors_for(config.replace(
-            gcr=False, trim_fraction=0.0, max_correspondence_distance_m=config.initial_correspondence_distance_m))
+        self._chain_without_gcr = rejectors_for(config.replace(gcr={"enabled": False}))
+        # The first registration's coarse pass: a wide bound, no trimming, no GCR
+        self._coarse_config = config.replace(gcr={"enabled": False}, match={
+            "max_correspondence_distance_m": config.match.initial_correspondence_distance_m, "trim_fraction": 0.0})
+        self._chain_coarse = rejectors_for(self._coarse_config)
 
     @property
     def poses(self) -> list[np.ndarray]:
@@ -320,19 +322,19 @@ class Odometry:
         T_guess = self._predicted_motion(period)
 
         t = time.perf_counter()
-        deskewing = cfg.deskew and clean.times_s is not None
+        deskewing = cfg.deskew.enabled and clean.times_s is not None
         # The scan is voxelised and its normals and NCF computed as measured, and then its ICP points,
         # normals and centroids are de-skewed, each with its voxel's mean firing time: a voxel's and
         # a normal's neighbours fire within microseconds of each other (except at the sweep's seam),
         # so they move rigidly, and the beams the NCF's noise follows start at the sensor's origin
         # only in the measured frame. Far fewer points to move. (A raw target keeps every de-skewed point.)
-        filter_first = deskewing and cfg.match_target != "raw"
+        filter_first = deskewing and cfg.match.target != "raw"
         if deskewing and not filter_first:
             clean.points = deskew(clean.points, clean.times_s, T_guess, period)
         diag.deskewed = deskewing
         seconds["deskew"] = time.perf_counter() - t
 
-        if clean.rings is None and cfg.gcr and scan_normals_needed(cfg):
+        if clean.rings is None and cfg.gcr.enabled and scan_normals_needed(cfg):
             clean.rings = ring_of_points(clean.points, self.sensor)
         scan = filter_scan(clean.points, cfg, clean.rings, self.sensor.range_noise_std_m if self.sensor else None,
                            raw_times_s=clean.times_s if deskewing else None)
@@ -342,7 +344,7 @@ class Odometry:
             seconds["deskew"] += time.perf_counter() - t
         diag.filter_counts = scan.counts
         seconds.update(scan.seconds)
-        diag.too_few_points = len(scan) < cfg.min_points
+        diag.too_few_points = len(scan) < cfg.filter.min_points
 
         T_deskew = T_guess  # the motion the scan is de-skewed with now
         if not st.poses:
@@ -373,7 +375,7 @@ class Odometry:
         # GCR bounds matches by the sensor's sampling spacing (cm to dm), so it needs a close
         # initial guess; the first registration has no motion to extrapolate and starts from
         # identity, so it runs without GCR.
-        chain = self._chain_with_gcr if cfg.gcr and not first else self._chain_without_gcr
+        chain = self._chain_with_gcr if cfg.gcr.enabled and not first else self._chain_without_gcr
         # Transforms into the target's frame: the world for a map; for scan-to-scan the target
         # scan, usually the previous frame (then exactly the identity: rounding must not feed back).
         T_world_prev = st.poses[-1]
@@ -392,9 +394,8 @@ class Odometry:
             # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
             # the correspondence bound, and the points that see it (few, in a corridor) would be
             # trimmed first. A coarse registration with a wide bound and no trimming comes first.
-            coarse = register(source, target, T_init, cfg.replace(
-                max_correspondence_distance_m=cfg.initial_correspondence_distance_m, trim_fraction=0.0),
-                self._chain_coarse, T_target_prev, motion_prior=False)
+            coarse = register(source, target, T_init, self._coarse_config, self._chain_coarse, T_target_prev,
+                              motion_prior=False)
             if not coarse.singular:
                 T_init = coarse.T_target_source
         result = register(source, target, T_init, cfg, chain, T_target_prev, prior)
@@ -412,7 +413,7 @@ class Odometry:
         # motion with a gain near -1 (a too-fast de-skew makes the scan look closer), so plain
         # re-use of the estimate oscillates: move the de-skew motion halfway towards the
         # estimate (a damped fixed-point iteration) and refine. Only the filtered points move.
-        for _ in range(cfg.deskew_refinements if deskewing else 0):
+        for _ in range(cfg.deskew.refinements if deskewing else 0):
             if result.singular:
                 break
             motion = motion_of(result.T_target_source)
@@ -448,8 +449,8 @@ class Odometry:
         # A car cannot change its motion by metres within one frame: such an estimate is
         # a failed registration (degenerate scene, wrong local minimum), not motion.
         deviation = se3.inverse(T_guess) @ T
-        if not first and (np.linalg.norm(deviation[:3, 3]) > cfg.max_prediction_error_m
-                          or np.degrees(se3.rotation_angle(deviation)) > cfg.max_prediction_error_deg):
+        if not first and (np.linalg.norm(deviation[:3, 3]) > cfg.icp.max_prediction_error_m
+                          or np.degrees(se3.rotation_angle(deviation)) > cfg.icp.max_prediction_error_deg):
             diag.implausible = True
             T = T_guess
         return T, T_deskew
@@ -475,7 +476,7 @@ class Odometry:
         redo = raw_times_s is not None and len(st.poses) > 1
         if redo:
             redeskew_scan(scan, T_deskew, T, period)
-            if cfg.match_target == "raw":
+            if cfg.match.target == "raw":
                 scan.raw_points, _ = redeskew(scan.raw_points, scan.raw_points, raw_times_s, T_guess, T, period)
                 scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
         st.target_scan = scan

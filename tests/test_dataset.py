@@ -310,9 +310,18 @@ def test_cli_refuses_bad_numbers_before_any_work(tmp_path, capsys, argv, words):
     assert not out.exists()
 
 
-def test_cli_refuses_a_set_value_that_is_not_yaml(tmp_path, capsys):
-    code = salo(["odometry", str(tmp_path / "seq"), "--set", "voxel_size_m=[", "--out", str(tmp_path / "p.txt")])
-    assert code == 2 and "--set 'voxel_size_m=[': not a YAML value" in capsys.readouterr().err
+def test_cli_refuses_a_bad_set_before_any_work(tmp_path, capsys):
+    cases = [
+        ("filter.voxel_size_m=[", "--set: key 'filter.voxel_size_m' must be a number > 0 (m), got '['"),
+        ("voxel_size_m=0.5", "--set: key 'voxel_size_m' is unknown; did you mean 'filter.voxel_size_m'?"),
+        ("ncf=false", "--set: key 'ncf' must be a mapping of ncf keys, got str; did you mean 'ncf.enabled'?"),
+        ("ncf.applies_to=map", "--set: key 'ncf.applies_to' 'map' needs match.target: map"),
+        ("deskew.enabled", "--set 'deskew.enabled': expected KEY=VALUE"),
+    ]
+    for pair, words in cases:
+        code = salo(["odometry", str(tmp_path / "seq"), "--variant", "salo", "--set", pair,
+                     "--out", str(tmp_path / "p.txt")])
+        assert code == 2 and words in capsys.readouterr().err, pair
     assert not (tmp_path / "p.txt").exists()
 
 

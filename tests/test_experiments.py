@@ -138,7 +138,7 @@ def test_map_truth_follows_each_point_from_its_scan():
         frames.append(MapFrame(scan, truth_of_points(raw, cKDTree(raw), rows, sidecar), T))
         world_points.append(world[rows])
         world_ids.append(ids[rows])
-    config = variant("salo-map").replace(map_points_per_voxel=3, map_max_distance_m=12.0)
+    config = variant("salo-map").replace(map={"points_per_voxel": 3, "max_distance_m": 12.0})
     built = build_map_target(frames, config, load_sensor("salo32"))
     points = built.target.points
     assert len(points) == len(built.local_map) == len(built.truth)
@@ -414,8 +414,8 @@ def test_cli_commands_parse():
 
     parser = argparse.ArgumentParser(prog="salo")
     cli_experiment.add_commands(parser.add_subparsers(dest="command", required=True))
-    a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match_target=raw"])
-    assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match_target=raw"]
+    a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match.target=raw"])
+    assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match.target=raw"]
     from tools.experiments.table import DEFAULT_METHODS
 
     assert a.methods == ",".join(DEFAULT_METHODS)  # the CLI's spelled-out default is the table's

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import box_room, constant_velocity
 
-from odometry.config import BL, NCF, SALO, ConfigError, config_from_dict, load_config, variant
+from odometry.config import BL, NCF, SALO, SALO_MAP, ConfigError, config_from_dict, load_config, variant
 from odometry.deskew import deskew, redeskew
 from odometry.estimation import point_to_plane_step
 from odometry.filters import voxel_centroids
@@ -74,10 +74,10 @@ def test_termination():
     q, n = planes_cloud(rng)
     tgt = Target(q, __import__("scipy").spatial.cKDTree(q), n)
     src = Source(se3.transform_points(se3.exp(np.array([0.2, 0, 0, 0, 0, 0.02])), q), -n)
-    capped = register(src, tgt, np.eye(4), cfg.replace(max_iterations=1))
+    capped = register(src, tgt, np.eye(4), cfg.replace(icp={"max_iterations": 1}))
     assert capped.iterations == 1 and not capped.converged
     full = register(src, tgt, np.eye(4), cfg)
-    assert full.converged and full.iterations < cfg.max_iterations
+    assert full.converged and full.iterations < cfg.icp.max_iterations
 
 
 def test_voxel_centroids():
@@ -106,7 +106,7 @@ def test_deskew_matches_simulator_truth():
 def test_constant_velocity_extrapolation_when_a_frame_is_empty():
     rng = np.random.default_rng(3)
     q, _ = planes_cloud(rng, 4000)
-    odo = Odometry(BL.replace(normal_neighbours=10, min_range_m=0.1, deskew=False))
+    odo = Odometry(BL.replace(filter={"normal_neighbours": 10}, clean={"min_range_m": 0.1}, deskew={"enabled": False}))
     step = se3.exp(np.array([0.3, 0.05, 0.0, 0.0, 0.0, 0.01]))
     poses = [np.eye(4), step, step @ step]
     for T in poses[:2]:
@@ -126,27 +126,56 @@ def test_constant_velocity_extrapolation_when_a_frame_is_empty():
 def test_gcr_without_sensor_is_a_clear_error():
     with pytest.raises(OdometryError, match="--sensor"):
         Odometry(SALO)
-    Odometry(NCF.replace(ncf_range_noise_std_m=0.02))  # the NCF alone can run without a sensor table
+    Odometry(NCF.replace(ncf={"range_noise_std_m": 0.02}))  # the NCF alone can run without a sensor table
 
 
 def test_config_validation_and_yaml(tmp_path):
-    assert variant("bl").gcr is False and variant("ncf").ncf and variant("salo").gcr
+    assert variant("bl").gcr.enabled is False and variant("ncf").ncf.enabled and variant("salo").gcr.enabled
     with pytest.raises(ConfigError, match="unknown odometry variant 'x'"):
         variant("x")
-    with pytest.raises(ConfigError, match="'trim_fraction' must be in"):
-        SALO.replace(trim_fraction=1.5)
-    with pytest.raises(ConfigError, match="'voxel_size_m' must be a number > 0"):
-        SALO.replace(voxel_size_m=0)
-    with pytest.raises(ConfigError, match="'ncf_noise_model'"):
-        SALO.replace(ncf_noise_model="gaussian")
-    with pytest.raises(ConfigError, match="'bogus' is not a parameter"):
-        config_from_dict({"bogus": 1})
+
+    def error(fn, *args, **kwargs) -> str:
+        with pytest.raises(ConfigError) as err:
+            fn(*args, **kwargs)
+        assert isinstance(err.value, ValueError) and "\n" not in str(err.value)
+        return str(err.value)
+
+    salo = "odometry config 'salo': "
+    assert error(SALO.replace, match={"trim_fraction": 1.5}) == (
+        salo + "key 'match.trim_fraction' must be a number in [0, 1), got 1.5")
+    assert error(SALO.replace, filter={"voxel_size_m": 0}) == (
+        salo + "key 'filter.voxel_size_m' must be a number > 0 (m), got 0")
+    assert error(SALO.replace, ncf={"noise_model": "gaussian"}) == (
+        salo + "key 'ncf.noise_model' must be one of range, isotropic, got 'gaussian'")
+    assert error(SALO.replace, map={"max_distance_m": 0}) == (
+        salo + "key 'map.max_distance_m' must be a number > 0 (m) or null, got 0")
+    assert error(SALO.replace, icp={"max_iterations": 0}) == (
+        salo + "key 'icp.max_iterations' must be an integer >= 1, got 0")
+    assert error(SALO.replace, clean={"min_range_m": 130.0}) == (
+        salo + "key 'clean.min_range_m' must be < clean.max_range_m (130.0 >= 120.0)")
+    assert error(SALO.replace, ncf={"applies_to": "map"}) == (
+        salo + "key 'ncf.applies_to' 'map' needs match.target: map (there is no map to judge)")
+    assert error(SALO.replace, gcr={"bogus": 1}).startswith(salo + "key 'gcr.bogus' is unknown (known: enabled,")
+    # the flat keys of earlier versions name their new place
+    for old, new in (("voxel_size_m", "filter.voxel_size_m"), ("match_target", "match.target"),
+                     ("ncf_max_normal_std_deg", "ncf.max_normal_std_deg"), ("deskew_refinements", "deskew.refinements"),
+                     ("map_voxel_size_m", "map.voxel_size_m"), ("min_points", "filter.min_points"),
+                     ("gcr_noise_floor_m", "gcr.noise_floor_m"), ("rotation_scale_m", "degeneracy.rotation_scale_m")):
+        assert error(config_from_dict, {old: 1}, origin="old.yaml") == (
+            f"old.yaml: key '{old}' is unknown; did you mean '{new}'?")
+    assert error(config_from_dict, {"ncf": False}, origin="old.yaml") == (
+        "old.yaml: key 'ncf' must be a mapping of ncf keys, got bool; did you mean 'ncf.enabled'?")
+    # sections overlay the base's: keys left out keep its values
+    both = SALO_MAP.replace(name="x", gcr={"enabled": False}, match={"trim_fraction": 0.0})
+    assert (both.name, both.gcr.enabled, both.gcr.formula, both.match.trim_fraction, both.match.target,
+            both.ncf.applies_to) == ("x", False, "beam", 0.0, "map", "map")
+    assert config_from_dict({"name": "ncf-map"}) == variant("ncf-map")  # the base: the variant named
     p = tmp_path / "c.yaml"
-    p.write_text(NCF.replace(voxel_size_m=0.7).to_yaml())
-    assert load_config(p) == NCF.replace(voxel_size_m=0.7)
-    p.write_text("voxel_size_m: -1\n")
-    with pytest.raises(ConfigError, match="c.yaml"):
-        load_config(p)
+    p.write_text(NCF.replace(filter={"voxel_size_m": 0.7}).to_yaml())
+    assert load_config(p) == NCF.replace(filter={"voxel_size_m": 0.7})
+    assert "filter:\n  voxel_size_m: 0.7\n" in p.read_text()
+    p.write_text("filter: {voxel_size_m: -1}\n")
+    assert error(load_config, p) == f"{p}: key 'filter.voxel_size_m' must be a number > 0 (m), got -1"
 
 
 def test_implausible_estimate_is_flagged_and_extrapolated():
@@ -154,7 +183,8 @@ def test_implausible_estimate_is_flagged_and_extrapolated():
     (here 1 cm, while the platform accelerates by 20 cm per frame) is not trusted."""
     rng = np.random.default_rng(4)
     q, _ = planes_cloud(rng, 4000)
-    cfg = BL.replace(normal_neighbours=10, min_range_m=0.1, deskew=False, max_prediction_error_m=0.01)
+    cfg = BL.replace(filter={"normal_neighbours": 10}, clean={"min_range_m": 0.1}, deskew={"enabled": False},
+                     icp={"max_prediction_error_m": 0.01})
     odo = Odometry(cfg)
     steps = [np.eye(4), se3.exp(np.r_[0.2, 0, 0, 0, 0, 0]), se3.exp(np.r_[0.4, 0, 0, 0, 0, 0])]
     pose = np.eye(4)
@@ -165,7 +195,7 @@ def test_implausible_estimate_is_flagged_and_extrapolated():
             assert not odo.last.implausible  # the first registration has no prediction to compare with
     assert odo.last.implausible and odo.last.extrapolated
     assert np.allclose(odo.poses[2], odo.poses[1] @ (se3.inverse(odo.poses[0]) @ odo.poses[1]))
-    loose = Odometry(cfg.replace(max_prediction_error_m=1.0))
+    loose = Odometry(cfg.replace(icp={"max_prediction_error_m": 1.0}))
     pose = np.eye(4)
     for step in steps:
         pose = pose @ step
@@ -180,8 +210,8 @@ def test_every_match_target_tracks_a_known_motion(target):
     rng = np.random.default_rng(5)
     q, _ = planes_cloud(rng, 4000)
     q += rng.normal(0.0, 0.002, q.shape)
-    cfg = BL.replace(normal_neighbours=10, min_range_m=0.1, deskew=False, match_target=target,
-                     map_voxel_size_m=0.5)
+    cfg = BL.replace(filter={"normal_neighbours": 10}, clean={"min_range_m": 0.1}, deskew={"enabled": False},
+                     match={"target": target}, map={"voxel_size_m": 0.5})
     odo = Odometry(cfg)
     step = se3.exp(np.array([0.15, 0.03, 0.01, 0.0, 0.002, 0.01]))
     pose = np.eye(4)

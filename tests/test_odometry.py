@@ -34,7 +34,7 @@ def register_pair(a, b, name, init):
     ta = filter_scan(a.xyz, cfg, a.ring, SENSOR.range_noise_std_m)
     sb = filter_scan(b.xyz, cfg, b.ring, SENSOR.range_noise_std_m)
     thr = None
-    if cfg.gcr:
+    if cfg.gcr.enabled:
         thr = gcr_threshold_m(sb.points, sb.normals, sb.rings, SENSOR)
         thr[np.isnan(thr)] = np.inf
     return register(Source(sb.points, sb.normals, thr), Target(ta.points, cKDTree(ta.points), ta.normals), init, cfg)
@@ -93,7 +93,7 @@ def test_sequence_salo_with_deskew_below_one_percent(city_sequence):
     assert m.t_err_pct < 1.0, m.to_dict()
     assert all(d.deskewed for d in with_deskew.diagnostics)
     # the simulator's distortion is real: without de-skew the same method drifts more
-    without = evaluate_trajectory(gt, run_sequence(seq, variant("salo").replace(deskew=False)).poses)
+    without = evaluate_trajectory(gt, run_sequence(seq, variant("salo").replace(deskew={"enabled": False})).poses)
     assert without.t_err_pct > 2 * m.t_err_pct, (without.t_err_pct, m.t_err_pct)
     # the diagnostics: a few per cent of the raw points survive the filters on this data
     # (about 5 %; the filters see the scan as measured, before de-skew)
@@ -111,7 +111,7 @@ def test_real_kitti_per_frame_error(real_data, seq_id, bound_cm):
 
     seq = open_sequence(real_data / "kitti/sequences" / seq_id, sensor="hdl64e")
     for name in ("bl", "ncf", "salo", DEFAULT_VARIANT):
-        run = run_sequence(seq, variant(name).replace(kitti_vertical_correction_deg=0.205))
+        run = run_sequence(seq, variant(name).replace(clean={"kitti_vertical_correction_deg": 0.205}))
         gt_steps = se3.inverse(seq.poses[:-1]) @ seq.poses[1:]
         est_steps = se3.inverse(run.poses[:-1]) @ run.poses[1:]
         err = se3.inverse(gt_steps) @ est_steps

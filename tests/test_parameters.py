@@ -107,7 +107,8 @@ def test_sensor_errors_keep_their_shape():
 def test_sweep_spec_round_trips_and_lists_its_keys(capsys):
     example = load_spec(REPO / "tools/sweep/examples/noise-study.yaml")
     assert spec_from_dict(example.to_dict()) == example
-    with_configs = spec_from_dict({"configs": {"v4": {"base": "bl", "voxel_size_m": 0.4}}, "variants": ["v4"]})
+    with_configs = spec_from_dict({"configs": {"v4": {"base": "bl", "filter": {"voxel_size_m": 0.4}}},
+                                   "variants": ["v4"]})
     assert spec_from_dict(with_configs.to_dict()) == with_configs
     assert schema(SweepSpec).names == tuple(SweepSpec().to_dict())  # every YAML key is declared
     with pytest.raises(SystemExit):

@@ -68,10 +68,13 @@ def tiny_sweep(tmp_path_factory):
         ({"scene_params": {"city": {"streets_x": "many"}}}, "scene_params.city.streets_x", "got 'many'"),
         ({"scene_params": {"tunnel": {"length_m": 300}}}, "scene_params.tunnel", "not a scene of this sweep"),
         ({"scene_params": {"city": {"seed": 3}}}, "scene_params.city.seed", "axis"),
-        ({"odometry": {"voxel_size": 0.3}}, "odometry", "voxel_size"),
-        ({"odometry": {"voxel_size_m": -1}}, "odometry", "voxel_size_m"),
+        ({"odometry": {"voxel_size": 0.3}}, "odometry.voxel_size", "unknown"),
+        ({"odometry": {"filter": {"voxel_size_m": -1}}}, "odometry.filter.voxel_size_m", "> 0"),
+        ({"odometry": {"voxel_size_m": 0.5}}, "odometry.voxel_size_m", "did you mean 'filter.voxel_size_m'?"),
+        ({"odometry": {"clean": {"min_range_m": 200}}}, "odometry.clean.min_range_m", "< clean.max_range_m"),
+        ({"configs": {"v4": {"match": {"trim_fraction": 1}}}}, "configs.v4.match.trim_fraction", "[0, 1)"),
         ({"commands": {"mine": "my_odometry {sequence}"}}, "commands.mine", "{out}"),
-        ({"configs": {"bl": {"voxel_size_m": 0.4}}}, "configs", "already a variant"),
+        ({"configs": {"bl": {"filter": {"voxel_size_m": 0.4}}}}, "configs", "already a variant"),
         ({"configs": {"v4": {"base": "loam"}}}, "configs.v4.base", "loam"),
         ({"keep_sequences": "yes"}, "keep_sequences", "true or false"),
     ],
@@ -115,7 +118,7 @@ def test_run_keys_are_stable_hashes_of_resolved_parameters():
                            "scene_params": {"city": {"streets_x": "4"}}}).runs()
     assert same[0].key == runs[0].key
     # An odometry override changes the run but not the sequence.
-    tuned = spec_from_dict({**TINY, "odometry": {"voxel_size_m": 0.6}}).runs()
+    tuned = spec_from_dict({**TINY, "odometry": {"filter": {"voxel_size_m": 0.6}}}).runs()
     assert tuned[0].sim_key == runs[0].sim_key and tuned[0].key != runs[0].key
     # The sensor's resolved model is hashed: its own noise given explicitly is the same sequence.
     own = spec_from_dict({k: v for k, v in TINY.items() if k != "noise_std_m"}).runs()[0]

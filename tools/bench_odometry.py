@@ -80,7 +80,7 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int) -> None:
             print(f"{spec.label}: {reason}")
             continue
         cfg = variant(DEFAULT_VARIANT)
-        run = run_peer(name, seq, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
+        run = run_peer(name, seq, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
         rows.append((spec.label, run.seconds, evaluate_trajectory(seq.poses, run.poses).t_err_pct, None, None))
         if name == REFERENCE_PEER:
             reference = run.seconds

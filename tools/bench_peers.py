@@ -47,7 +47,7 @@ def main() -> None:
             if reason is not None:
                 print(f"{folder.name:12s} {'':9s} {label:15s} {reason}")
                 continue
-            run = run_peer(name, frames, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
+            run = run_peer(name, frames, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
             m = evaluate_trajectory(seq.poses, run.poses)
             kind = "times" if run.config["frames_with_times"] else "no times"
             print(f"{folder.name:12s} {kind:9s} {label:15s} {np.median(run.instants):9.2f} {m.t_err_pct:8.3f} "

@@ -58,7 +58,7 @@ def main() -> None:
                     continue
                 poses = run_peer(m, seq).poses
             else:
-                cfg = variant(m).replace(kitti_vertical_correction_deg=0.205 if kitti else 0.0)
+                cfg = variant(m).replace(clean={"kitti_vertical_correction_deg": 0.205 if kitti else 0.0})
                 poses = run_sequence(seq, cfg).poses
             t, r = pair_errors(seq.poses, poses)
             print(f"{name:11s} {m + (' (default)' if m == DEFAULT_VARIANT else ''):20s} {t:6.2f} {r:7.3f}")

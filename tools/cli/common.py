@@ -107,20 +107,22 @@ def frames_selected(n: int, frames: slice | None) -> int:
     return len(range(*(frames or slice(None)).indices(n)))
 
 
-def parse_assignments(pairs: list[str]) -> dict:
-    """``--set KEY=VALUE`` pairs -> {key: value}, each value read as YAML (``0.4`` a number, ``raw`` a string)."""
-    import yaml
+def parse_config_set(pairs: list[str]) -> dict:
+    """Odometry ``--set KEY=VALUE`` pairs -> the overrides, nested by stage as a config YAML holds them.
 
-    out = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise CommandError(f"--set {pair!r}: expected KEY=VALUE")
-        try:
-            out[key.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError as exc:
-            raise CommandError(f"--set {pair!r}: not a YAML value ({exc.problem or exc})") from None
-    return out
+    A key is dotted, ``STAGE.KEY`` (``ncf.max_normal_std_deg=3``, ``deskew.enabled=false``;
+    ``salo odometry --keys`` lists them); each value is text, converted and checked by the key's
+    declaration (``odometry.config``, ``paramspec``). Overlay the result on a config with
+    ``config_from_dict(changes, base=..., origin="--set")``. Raises CommandError naming the key;
+    an old flat key names its new one ("key 'voxel_size_m' is unknown; did you mean 'filter.voxel_size_m'?").
+    """
+    from odometry.config import ConfigError, OdometryConfig
+
+    try:
+        return OdometryConfig.schema().read(assignments(pairs), "--set", coerce=True, partial=True,
+                                            error=ConfigError)
+    except ParamError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> dict[str, Any]:
@@ -181,5 +183,5 @@ def command_line() -> list[str]:
     return ["salo", *sys.argv[1:]]
 
 
-__all__ = ["CommandError", "command_line", "frames_selected", "parse_assignments", "parse_frames",
+__all__ = ["CommandError", "command_line", "frames_selected", "parse_config_set", "parse_frames",
            "parse_overrides", "progress_bar", "real_number", "run_counter", "split_seed", "whole_number"]

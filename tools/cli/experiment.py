@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import CommandError, command_line, parse_assignments, real_number, whole_number
+from .common import CommandError, command_line, parse_config_set, real_number, whole_number
 
 DEFAULT_ROOT = Path("out/experiments")
 DEFAULT_CACHE = DEFAULT_ROOT / "sequences"
@@ -51,7 +51,8 @@ def _common(p, name: str) -> None:
                    help=f"simulated sequences, reused when their parameters match (default {DEFAULT_CACHE})")
     p.add_argument("--quick", action="store_true", help="a small, fast run (minutes -> seconds): for trying it out")
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override an odometry parameter for every method (repeatable), e.g. match_target=raw")
+                   help="override an odometry parameter for every method (repeatable), a dotted key: e.g. "
+                   "match.target=raw (salo odometry --keys lists them)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
 
 
@@ -147,21 +148,23 @@ def _add_generalize(sub) -> None:
     p.add_argument("--quick", action="store_true",
                    help="a small, fast run: 40 frames of city and canyon, one seed, default + bl + kiss-icp")
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override an odometry parameter for our methods (repeatable)")
+                   help="override an odometry parameter for our methods (repeatable), a dotted key: e.g. "
+                   "ncf.max_normal_std_deg=3 (salo odometry --keys lists them)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     p.set_defaults(func=cmd_generalize)
 
 
 # ---------------------------------------------------------------- helpers
-def _config_overrides(pairs: list[str]) -> tuple:
-    from odometry.config import ConfigError, variant
+def _config_overrides(pairs: list[str]) -> dict:
+    """``--set`` odometry overrides, nested by stage; checked once on the ``salo`` config."""
+    from odometry.config import SALO, ConfigError, config_from_dict
 
-    changes = parse_assignments(pairs)
+    changes = parse_config_set(pairs)
     try:
-        variant("salo").replace(**changes)  # validate once, with the message naming the key
-    except (ConfigError, TypeError) as exc:
-        raise CommandError(f"--set: {exc}") from None
-    return tuple(sorted(changes.items()))
+        config_from_dict(changes, base=SALO, origin="--set")
+    except ConfigError as exc:
+        raise CommandError(str(exc)) from None
+    return changes
 
 
 def _specs(text: str | None, default: list, args, quick_frames: int, start_default: float = 0.0) -> tuple:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import CommandError, frames_selected, parse_assignments, parse_frames, progress_bar
+from .common import CommandError, frames_selected, parse_config_set, parse_frames, progress_bar
 
 
 def add_commands(sub) -> None:
@@ -26,7 +26,8 @@ def add_commands(sub) -> None:
     p.add_argument("--sensor", help="preset or YAML (default: the folder's sensor.yaml)")
     p.add_argument("--config", type=Path, help="YAML with odometry parameters overriding the variant's")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one parameter (repeatable), e.g. --set voxel_size_m=0.4")
+                   help="override one parameter (repeatable), a dotted key: e.g. --set filter.voxel_size_m=0.4, "
+                   "--set deskew.enabled=false (--keys lists them)")
     p.add_argument("--frames", help="frame range A:B (Python slice, e.g. 0:100)")
     p.add_argument("--poses", type=Path, help="ground truth for a real KITTI sequence (camera-frame poses file)")
     p.add_argument("--out", type=Path, help="output poses file (default: out/<sequence name>/<variant>/poses.txt)")
@@ -46,11 +47,9 @@ def cmd_odometry(args) -> int:
         config = variant(args.variant)
         if args.config:
             config = load_config(args.config, base=config)
-        changes = parse_assignments(args.set)
+        config = config_from_dict(parse_config_set(args.set), base=config, origin="--set")
         if args.kitti_correction:
-            changes["kitti_vertical_correction_deg"] = 0.205
-        if changes:
-            config = config_from_dict(changes, base=config, origin="--set")
+            config = config.replace(clean={"kitti_vertical_correction_deg": 0.205})
     except ConfigError as exc:
         raise CommandError(str(exc)) from None
     seq = open_sequence(args.sequence, sensor=args.sensor, poses=args.poses, topic=args.topic)
@@ -70,9 +69,9 @@ def cmd_odometry(args) -> int:
         print(f"  {result.flags.extrapolated} frames extrapolated (too few points, singular system or an estimate "
               f"far from the constant-velocity prediction): see {files.diagnostics}")
     if stretches:
-        print(f"  weakly constrained (translational eigenvalue per match < {config.degenerate_eigenvalue:g}"
-              + (f", or the prior kept below {config.min_constraint_eigenvalue:g}"
-                 if config.min_constraint_eigenvalue else "") + "):")
+        print(f"  weakly constrained (translational eigenvalue per match < {config.degeneracy.degenerate_eigenvalue:g}"
+              + (f", or the prior kept below {config.degeneracy.min_constraint_eigenvalue:g}"
+                 if config.degeneracy.min_constraint_eigenvalue else "") + "):")
         for st in stretches[:20]:
             print("    " + st.describe())
         if len(stretches) > 20:

@@ -37,6 +37,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from paramspec import value_text
+
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
 
 log = logging.getLogger(__name__)
@@ -167,7 +169,7 @@ def run_method(method: str, sequence, overrides: dict) -> MethodRun:
             return MethodRun(method, False, why)
         cfg = odometry_config("default", overrides)
         try:
-            run = peer.run_peer(method, sequence, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m)
+            run = peer.run_peer(method, sequence, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
         except Exception as exc:  # noqa: BLE001 - a peer failing must not end the suite; the row says why
             log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
             return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
@@ -229,7 +231,8 @@ def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: d
 @dataclass(frozen=True)
 class GeneralizeParams:
     """split: "tuning" or "evaluation" (or explicit ``seeds``). families, kinds, methods, frames:
-    what runs. config_overrides: odometry parameters changed for every one of our methods."""
+    what runs. config_overrides: odometry parameters changed for every one of our methods, nested by
+    stage as in YAML."""
 
     split: str = "evaluation"
     seeds: tuple[int, ...] = ()
@@ -237,7 +240,7 @@ class GeneralizeParams:
     kinds: tuple[str, ...] = KINDS
     methods: tuple[str, ...] = DEFAULT_METHODS
     frames: int = DEFAULT_FRAMES
-    config_overrides: tuple[tuple[str, object], ...] = ()
+    config_overrides: dict = field(default_factory=dict)
     segment_lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M
 
     def __post_init__(self) -> None:
@@ -410,7 +413,7 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
              f"failed: t_err > {FAILURE_T_ERR_PCT:g} %.", ""]
     if params.config_overrides:
         lines += ["Odometry parameters changed for our methods: "
-                  + ", ".join(f"`{k}: {v}`" for k, v in params.config_overrides) + ".", ""]
+                  + ", ".join(f"`{k}: {value_text(v)}`" for k, v in params.config_overrides.items()) + ".", ""]
     from odometry.config import DEFAULT_VARIANT
 
     lines += [f"`default` is `salo odometry`'s default configuration, the variant `{DEFAULT_VARIANT}`.", ""]

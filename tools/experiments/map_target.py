@@ -68,8 +68,8 @@ def build_map_target(frames: Sequence[MapFrame], config, sensor) -> MapTarget:
 
     Args:
         frames: at least one ``MapFrame``.
-        config: an ``OdometryConfig`` with ``match_target: map`` (its map parameters, and the
-            map NCF when ``ncf_applies_to`` is map or both).
+        config: an ``OdometryConfig`` with ``match.target: map`` (its map parameters, and the
+            map NCF when ``ncf.applies_to`` is map or both).
         sensor: ``simlidar.sensor.LidarModel`` (the map's range noise).
     """
     from odometry.pipeline import map_points, new_local_map

@@ -69,7 +69,7 @@ class NcfStudyParams:
     max_points_per_scan: subsample the ICP points (None: all). c_tau_deg: the
     thresholds swept (as 1-sigma angles). bin_edges_deg: calibration bins of the
     predicted max std. models: "range" and/or "isotropic". seed: subsampling.
-    config_overrides: changes to the ``salo`` config (voxel size, k).
+    config_overrides: changes to the ``salo`` config, nested by stage as in YAML (voxel size, k).
     """
 
     noise_levels_m: tuple[float, ...] = DEFAULT_NOISE_LEVELS_M
@@ -79,7 +79,7 @@ class NcfStudyParams:
     bin_edges_deg: tuple[float, ...] = DEFAULT_BIN_EDGES_DEG
     models: tuple[str, ...] = MODELS
     seed: int = 0
-    config_overrides: tuple[tuple[str, object], ...] = ()
+    config_overrides: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
@@ -91,17 +91,17 @@ class NcfStudyParams:
             "models": list(self.models),
             "seed": self.seed,
             "config_overrides": dict(self.config_overrides),
-            "max_curvature": self.config().max_curvature,
-            "ncf_max_normal_std_deg": self.config().ncf_max_normal_std_deg,
-            "voxel_size_m": self.config().voxel_size_m,
-            "normal_neighbours": self.config().normal_neighbours,
+            "max_curvature": self.config().filter.max_curvature,
+            "ncf_max_normal_std_deg": self.config().ncf.max_normal_std_deg,
+            "voxel_size_m": self.config().filter.voxel_size_m,
+            "normal_neighbours": self.config().filter.normal_neighbours,
         }
 
     def config(self):
         """The ``salo`` odometry config with the overrides: voxel size, k and the curvature bound used here."""
         from odometry.config import variant
 
-        return variant("salo").replace(**dict(self.config_overrides))
+        return variant("salo").replace(**self.config_overrides)
 
 
 @dataclass
@@ -139,11 +139,11 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
     rows = clean.kept_rows
     period = float(np.diff(sequence.times[:2])[0])
     raw = deskew(clean.points, clean.times_s, true_motion(sequence.poses, k), period)
-    centroids = voxel_centroids(raw, config.voxel_size_m)
+    centroids = voxel_centroids(raw, config.filter.voxel_size_m)
     if max_points is not None and len(centroids) > max_points:
         centroids = centroids[np.sort(rng.choice(len(centroids), max_points, replace=False))]
     tree = cKDTree(raw, balanced_tree=False, compact_nodes=False)
-    est = estimate_normals(raw, k=config.normal_neighbours, query_points=centroids, tree=tree)
+    est = estimate_normals(raw, k=config.filter.normal_neighbours, query_points=centroids, tree=tree)
     car = frame.fields
     nb_rows = rows[est.neighbour_indices]  # (M, k) sidecar rows of the neighbours
     true_n = np.asarray(car["normal"][nb_rows[:, 0]], dtype=np.float64)  # the nearest return's surface
@@ -160,7 +160,7 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
     sigma = sensor.range_noise_std_m
     for model in models:
         noise = RangeNoise(range_noise_std_m=sigma) if model == "range" else IsotropicNoise(point_noise_std_m=sigma)
-        nc = normal_covariance(P, noise, pca=est, noise_free_gaps=config.ncf_noise_free_gaps)  # as the odometry
+        nc = normal_covariance(P, noise, pca=est, noise_free_gaps=config.ncf.noise_free_gaps)  # as the odometry
         lam = nc.eigenvalues_rad2
         a = np.einsum("mj,mj->m", e, nc.eigenvectors[:, :, 1])
         b = np.einsum("mj,mj->m", e, nc.eigenvectors[:, :, 2])
@@ -271,7 +271,7 @@ def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path, progress: bool 
         for model in params.models:
             for subset in ("all", "single-surface"):
                 calib += calibration_rows(s, model, params.bin_edges_deg, noise, subset)
-            ctau += ctau_rows(s, model, params.c_tau_deg, noise, config.max_curvature)
+            ctau += ctau_rows(s, model, params.c_tau_deg, noise, config.filter.max_curvature)
             d2 = s.mahalanobis2[model]
             finite = np.isfinite(s.max_std_deg[model])
             overview.append({

@@ -9,9 +9,9 @@ Protocol (as the paper's, on simulated data):
   paper's data was de-skewed by the vehicle's odometry) and filtered as the
   odometry does (voxel grid, kNN normals, NCF, curvature: the ``salo``
   config). The source is the filtered scan; the target is either the filtered
-  previous scan (``match_target: filtered``, Alg. 1) or the previous de-skewed
-  raw scan with normals estimated where matched (``match_target: raw``).
-- Or the target is a local map (``match_target: map``, ``map_target``): the
+  previous scan (``match.target: filtered``, Alg. 1) or the previous de-skewed
+  raw scan with normals estimated where matched (``match.target: raw``).
+- Or the target is a local map (``match.target: map``, ``map_target``): the
   ``map_frames`` scans before the source, filtered as the odometry filters
   them for a map and inserted at their true poses into the odometry's
   ``LocalMap`` (world frame). The source is then made as the odometry makes it
@@ -120,7 +120,7 @@ class RejectorStudyParams:
     the ``map_frames`` scans before the source, ``map_target``). sequences: where the
     pairs come from. seed: the pair draw and the noise draws. truth_sigmas, truth_normal_deg:
     the definition of a true correspondence (``truth.TruthCriteria``).
-    config_overrides: changes to the odometry configs (both rejectors).
+    config_overrides: changes to the odometry configs (both rejectors), nested by stage as in YAML.
     """
 
     pairs: int = 100
@@ -131,7 +131,7 @@ class RejectorStudyParams:
     seed: int = 0
     truth_sigmas: float = 3.0
     truth_normal_deg: float = 15.0
-    config_overrides: tuple[tuple[str, object], ...] = ()
+    config_overrides: dict = field(default_factory=dict)
     map_frames: int = 10
 
     def to_dict(self) -> dict:
@@ -238,7 +238,7 @@ def make_target(scan: PreparedScan, kind: str, config):
     built as the odometry builds them (``odometry.pipeline.scan_target``)."""
     from odometry.pipeline import scan_target
 
-    target = scan_target(scan.filtered, config.replace(match_target=kind))
+    target = scan_target(scan.filtered, config.replace(match={"target": kind}))
     return target, (scan.truth if kind == "filtered" else truth_of_rows(scan.sidecar, scan.raw_rows))
 
 
@@ -310,7 +310,7 @@ class TargetCase:
 
         src = self.fresh_source()
         if src.gcr_threshold_m is None:
-            register(src, self.target, T, self.configs["gcr"].replace(max_iterations=1), [], self.T_previous)
+            register(src, self.target, T, self.configs["gcr"].replace(icp={"max_iterations": 1}), [], self.T_previous)
         return src
 
 
@@ -321,9 +321,9 @@ def evaluation_chains(configs: dict) -> dict:
 
     base = configs["distance"]
     return {
-        "distance": [distance_rejector(base.max_correspondence_distance_m)],
+        "distance": [distance_rejector(base.match.max_correspondence_distance_m)],
         "gcr": [geometric_rejector()],
-        "trimmed": [trimmed_rejector(base.trim_fraction)],
+        "trimmed": [trimmed_rejector(base.match.trim_fraction)],
         "bl_chain": rejectors_for(configs["distance"]),
         "salo_chain": rejectors_for(configs["gcr"]),
     }
@@ -440,8 +440,8 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progr
     scan_configs = {"distance": variant("ncf").replace(**overrides), "gcr": variant("salo").replace(**overrides)}
     # The odometry's map variants: NCF on the map's normals, so the scan has none of its own and
     # the GCR thresholds come from the map's normals at the first matches.
-    map_configs = {"distance": variant("ncf-map").replace(**{**overrides, "match_target": "map"}),
-                   "gcr": variant("salo-map").replace(**{**overrides, "match_target": "map"})}
+    on_map = {**overrides, "match": {**overrides.get("match", {}), "target": "map"}}
+    map_configs = {"distance": variant("ncf-map").replace(**on_map), "gcr": variant("salo-map").replace(**on_map)}
     sequences = [open_sequence(ensure_sequence(s, cache_dir, progress)) for s in params.sequences]
     rng = np.random.default_rng([params.seed, 0x5EED])
     chosen = draw_pairs([len(s) for s in sequences], params.pairs, rng)
@@ -470,7 +470,7 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progr
                 if kind in params.targets:
                     target, tgt_truth = make_target(tgt_scan, kind, scan_configs["gcr"])
                     cases.append(TargetCase(kind, source, src_scan.truth, target, tgt_truth, T_true, None,
-                                            {n: c.replace(match_target=kind) for n, c in scan_configs.items()},
+                                            {n: c.replace(match={"target": kind}) for n, c in scan_configs.items()},
                                             np.ones(len(source.points), dtype=bool)))
         if "map" in params.targets:
             first = max(0, k - params.map_frames)

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from paramspec import value_text
+
 from .peer import PEERS
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
 from .suite import SequenceSpec, ensure_sequence, table_suite
@@ -40,7 +42,7 @@ PEER_METHODS = tuple(PEERS)  # kiss-icp, genz-icp, small-gicp
 DEFAULT_METHODS = (*OUR_METHODS, *PEER_METHODS)
 METHOD_LABELS = {"bl": "BL", "ncf": "NCF", "salo": "SALO", **{name: p.label for name, p in PEERS.items()}}
 # A frame is "weakly constrained" when the smallest translational eigenvalue of its
-# per-point information (true normals) is below this (the odometry's degenerate_eigenvalue default).
+# per-point information (true normals) is below this (the odometry's degeneracy.degenerate_eigenvalue default).
 WEAK_TRANSLATION_EIGENVALUE = 0.01
 
 
@@ -51,14 +53,15 @@ class TableParams:
     sequences: the suite. methods: any of bl, ncf, salo, kiss-icp, genz-icp, small-gicp.
     segment_length_m: the paper's 100 m (shorter for quick runs; errors are
     still per 100 m). step_frames: spacing of segment starts (KITTI: 10).
-    config_overrides: changes to all three odometry configs (e.g. match_target).
+    config_overrides: changes to all three odometry configs, nested by stage as in YAML (e.g.
+    ``{"match": {"target": "raw"}}``).
     """
 
     sequences: tuple[SequenceSpec, ...] = field(default_factory=lambda: tuple(table_suite()))
     methods: tuple[str, ...] = DEFAULT_METHODS
     segment_length_m: float = 100.0
     step_frames: int = 10
-    config_overrides: tuple[tuple[str, object], ...] = ()
+    config_overrides: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         unknown = [m for m in self.methods if m not in DEFAULT_METHODS]
@@ -160,7 +163,7 @@ def run_peer_method(method: str, sequence, cfg, on_frame) -> MethodResult:
     if reason is not None:
         return MethodResult(method, False, reason)
     try:
-        run = run_peer(method, sequence, min_range_m=cfg.min_range_m, max_range_m=cfg.max_range_m,
+        run = run_peer(method, sequence, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m,
                        on_frame=on_frame)
     except PeerUnavailable as exc:
         return MethodResult(method, False, str(exc))
@@ -331,7 +334,7 @@ def table_markdown(result: TableResult, params: dict) -> str:
                      f"{result.params.step_frames}th frame) in metres per 100 m: mean mu and standard deviation "
                      "sigma per sequence, and over all segments pooled (Overall). Lowest mu per column in bold.")
     if result.params.config_overrides:
-        changed = ", ".join(f"`{k}: {v}`" for k, v in result.params.config_overrides)
+        changed = ", ".join(f"`{k}: {value_text(v)}`" for k, v in result.params.config_overrides.items())
         lines.append(f"\nOdometry parameters changed from the variants' defaults, for every method: {changed}.")
     if L != 100.0:
         lines.append(f"\n**Segments are {L:g} m here, not the paper's 100 m** (a quick run): errors are still "
@@ -445,7 +448,7 @@ def load_table_result(run_dir: str | Path) -> TableResult:
     specs = tuple(SequenceSpec(**{**{k: v for k, v in s.items() if k != "name"},
                                   "overrides": tuple(s["overrides"].items())}) for s in p["sequences"])
     params = TableParams(sequences=specs, methods=tuple(p["methods"]), segment_length_m=p["segment_length_m"],
-                         step_frames=p["step_frames"], config_overrides=tuple(p["config_overrides"].items()))
+                         step_frames=p["step_frames"], config_overrides=p["config_overrides"])
     rows = {(r["sequence"], r["method"]): r for r in res["table"]}
     sequences = []
     for spec in specs:

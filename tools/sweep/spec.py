@@ -13,8 +13,8 @@ their cross product, one run per combination. Every axis is optional::
     speed_m_s: 8                      # cruise speed (default: the scene's)
     start_s: 0                        # time along the path of the first sweep, s
     scene_params: {city: {route_blocks: 4}}
-    odometry: {voxel_size_m: 0.5}     # overrides for every built-in variant
-    configs: {salo-v04: {base: salo, voxel_size_m: 0.4}}   # extra named variants
+    odometry: {filter: {voxel_size_m: 0.5}}   # overrides for every built-in variant (odometry.config's keys)
+    configs: {salo-v04: {base: salo, filter: {voxel_size_m: 0.4}}}   # extra named variants
     commands: {mine: "my_odometry {sequence} {out}"}        # external odometries as variants
 
 A run's key is a stable hash of its *resolved* parameters (the scene's full
@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from odometry.config import VARIANTS, ConfigError, OdometryConfig, config_from_dict, variant
+from odometry.config import SALO, VARIANTS, OdometryConfig, config_from_dict, variant
 from paramspec import ParamError, Params, param, schema
 from simlidar.formats.salo import FORMAT_VERSION
 from simlidar.sensor import LidarModel, SensorError, load_sensor
@@ -145,13 +145,21 @@ class RunParams:
 
 
 def _config_changes(config: OdometryConfig) -> dict:
-    """The fields where ``config`` differs from its base variant (short, readable rows)."""
+    """The keys where ``config`` differs from its base variant, nested as in YAML (short, readable rows)."""
     base = VARIANTS.get(config.name)
-    full = config.to_dict()
-    if base is None:
-        return full
-    ref = base.to_dict()
-    return {k: v for k, v in full.items() if ref.get(k) != v}
+    return config.to_dict() if base is None else _changes(config.to_dict(), base.to_dict())
+
+
+def _changes(full: dict, ref: dict) -> dict:
+    out = {}
+    for k, v in full.items():
+        if isinstance(v, dict):
+            v = _changes(v, ref.get(k) or {})
+            if v:
+                out[k] = v
+        elif ref.get(k) != v:
+            out[k] = v
+    return out
 
 
 def _sweep_name(name: str) -> str | None:
@@ -312,9 +320,9 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
         raise fail("odometry.name", "is not an override: the variant is an axis, use 'variants' (or 'configs' for "
                                     "new ones)")
     try:
-        variant("salo").replace(**odometry)
-    except (ConfigError, TypeError) as exc:
-        raise fail("odometry", f"is invalid: {exc}") from None
+        config_from_dict(odometry, base=SALO)
+    except ParamError as exc:
+        raise exc.within("odometry").as_(SpecError).at(origin) from None
 
     for cname, template in v["commands"].items():
         if not isinstance(template, str) or not all(f in template for f in COMMAND_FIELDS):
@@ -328,11 +336,10 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
         base_name = params.pop("base", "salo")
         if base_name not in VARIANTS:
             raise fail(f"configs.{cname}.base", f"must be one of {', '.join(VARIANTS)}, got {base_name!r}")
-        try:
-            configs[cname] = config_from_dict({**odometry, **params, "name": cname}, base=variant(base_name),
-                                              origin=f"configs.{cname}")
-        except ConfigError as exc:
-            raise fail(f"configs.{cname}", f"is invalid: {exc}") from None
+        try:  # the overrides for every variant, then the config's own
+            configs[cname] = config_from_dict({**params, "name": cname}, base=variant(base_name).replace(**odometry))
+        except ParamError as exc:
+            raise exc.within(f"configs.{cname}").as_(SpecError).at(origin) from None
     clash = set(v["commands"]) & (set(configs) | set(VARIANTS)) or set(configs) & set(VARIANTS)
     if clash:
         raise fail("configs" if set(configs) & set(VARIANTS) else "commands",
