@@ -33,7 +33,7 @@ from typing import Any
 
 import yaml
 
-from paramspec import ParamError, Params, param, section
+from paramspec import ParamError, Params, differences, param, section
 from simlidar.yaml_file import read_yaml
 
 NOISE_MODELS = ("range", "isotropic")
@@ -89,7 +89,7 @@ class FilterParams(_Stage):
 
 @dataclass(frozen=True)
 class NcfParams(_Stage):
-    """The normal covariance filter (NCF, ``odometry.ncf``): points whose normal is too uncertain are dropped."""
+    """The normal covariance filter (NCF, odometry/ncf.py): points whose normal is too uncertain are dropped."""
 
     section_name = "ncf"
     enabled: bool = param(True, "apply the normal covariance filter")
@@ -124,7 +124,7 @@ class MatchParams(_Stage):
 
 @dataclass(frozen=True)
 class MapParams(_Stage):
-    """The local map (``odometry.local_map``), with match.target map."""
+    """The local map (odometry/local_map.py), when match.target is map."""
 
     section_name = "map"
     voxel_size_m: float = param(1.0, "edge of the map's voxels", above=0.0)
@@ -135,7 +135,7 @@ class MapParams(_Stage):
 
 @dataclass(frozen=True)
 class GcrParams(_Stage):
-    """The geometric correspondence rejector (GCR, ``odometry.gcr``)."""
+    """The geometric correspondence rejector (GCR, odometry/gcr.py)."""
 
     section_name = "gcr"
     enabled: bool = param(True, "apply the geometric correspondence rejector")
@@ -164,7 +164,7 @@ class IcpParams(_Stage):
 
 @dataclass(frozen=True)
 class DegeneracyParams(_Stage):
-    """Degeneracy (``odometry.constraints``): weakly constrained directions of motion."""
+    """Degeneracy (odometry/constraints.py): weakly constrained directions of motion."""
 
     section_name = "degeneracy"
     degenerate_eigenvalue: float = param(0.01, "flag a frame whose smallest translational eigenvalue of the "
@@ -248,6 +248,11 @@ def variant(name: str) -> OdometryConfig:
     if name not in VARIANTS:
         raise ConfigError(f"unknown odometry variant '{name}' (known: {', '.join(VARIANTS)})")
     return VARIANTS[name]
+
+
+def variant_changes() -> dict[str, dict]:
+    """Each variant's changes to the defaults (the salo variant's), as ``{dotted key: value}``."""
+    return {name: {k: v for k, v in differences(c, SALO).items() if k != "name"} for name, c in VARIANTS.items()}
 
 
 def config_from_dict(data: Any, base: OdometryConfig | None = None, origin: str = "config", *,

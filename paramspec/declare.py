@@ -551,6 +551,17 @@ def check(obj: Any) -> None:
             object.__setattr__(obj, m.name, new)
 
 
+def differences(obj: Any, base: Any) -> dict:
+    """``{dotted key: obj's value}`` for every key where ``obj`` differs from ``base`` (of the same class)."""
+    out = {}
+    for name, m in schema(type(obj)).walk():
+        if isinstance(m, Param):
+            value = functools.reduce(getattr, name.split("."), obj)
+            if value != functools.reduce(getattr, name.split("."), base):
+                out[name] = value
+    return out
+
+
 def assignments(pairs: Iterable[str], what: str = "--set") -> dict:
     """``KEY=VALUE`` strings as a dict of text; ``section.key=VALUE`` goes into the nested dict.
 

@@ -42,14 +42,14 @@ def _rows(sec: Section) -> list[tuple[str, Param | Section]]:
 def help_text(sec: Section, indent: str = "  ", header: bool = False) -> str:
     """One line per key: name, type, default, unit, range, help; a nested section's line heads its keys.
 
-    Columns are as wide as their widest entry (defaults and ranges up to 12 and
+    Columns are as wide as their widest entry (keys, defaults and ranges up to 40, 12 and
     18 characters: longer ones push their line out); ``header``: a first line naming the columns.
     """
     rows = _rows(sec)
     params = [(n, p) for n, p in rows if isinstance(p, Param)]
     if not params:
         return ""
-    width = min(30, max(len(n) for n, _ in params))
+    width = min(40, max(len(n) for n, _ in params))
     tw = max(len(p.type) for _, p in params)
     dw = min(12, max(len(default_text(p)) for _, p in params))
     uw = max(len(p.unit) for _, p in params)

@@ -1,9 +1,9 @@
-"""The declarations in use: scenes, the sensor file, the sweep spec; their listings and the parameters page.
+"""The declarations in use: scenes, the sensor file, the sweep spec, the odometry config; listings and the page.
 
 Each moved onto ``paramspec``: the listings (``salo scenes NAME``, ``salo sensors
---keys``, ``salo sweep --help``) and ``docs/parameters.md`` are made from the
-declarations, and the old validators' behaviour holds (their own tests, in
-test_scenes*.py, test_sensor.py and test_sweep_runner.py, keep passing).
+--keys``, ``salo sweep --help``, ``salo odometry --keys``) and ``docs/parameters.md``
+are made from the declarations, and the old validators' behaviour holds (their own
+tests, in test_scenes*.py, test_sensor.py, test_sweep_runner.py and test_icp.py, keep passing).
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 import scenes
-from paramspec import help_text, schema, unit_of
+from odometry.config import OdometryConfig, variant_changes
+from paramspec import Section, help_text, schema, unit_of
 from scenes.params import CommonParams
 from simlidar.sensor import SENSOR_FILE, LidarModel, SensorError, from_dict, load_preset, preset_names
 from tools.cli import main
@@ -140,11 +141,23 @@ def test_sweep_spec_errors_come_from_the_declarations():
         SweepSpec(frames=1)  # built directly, validated too
 
 
+# ---------------------------------------------------------------- odometry configs
+def test_salo_odometry_keys_lists_the_declarations_and_the_variants(capsys):
+    assert main(["odometry", "--keys"]) == 0
+    out = capsys.readouterr().out
+    assert help_text(schema(OdometryConfig), header=True) in out
+    assert "ncf.max_normal_std_deg" in out and "filtered|raw|map" in out and "[0, 1)" in out
+    assert variant_changes()["bl"] == {"ncf.enabled": False, "gcr.enabled": False} and variant_changes()["salo"] == {}
+    assert "  bl        ncf.enabled: false, gcr.enabled: false\n" in out
+
+
 # ---------------------------------------------------------------- the page
 def test_the_parameters_page_is_what_the_declarations_make():
     assert PAGE.read_text() == parameters_page(), "docs/parameters.md is out of date: run python -m tools.docs"
     page = parameters_page()
     for name in scenes.SCENES:
         assert f"### {name}" in page
-    for key in (*SENSOR_FILE.names, *schema(SweepSpec).names, *schema(CommonParams).names):
+    odometry = [name for name, m in schema(OdometryConfig).walk() if not isinstance(m, Section)]
+    assert "filter.voxel_size_m" in odometry and "ncf.max_normal_std_deg" in odometry
+    for key in (*SENSOR_FILE.names, *schema(SweepSpec).names, *schema(CommonParams).names, *odometry):
         assert f"| `{key}` |" in page, key

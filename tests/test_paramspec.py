@@ -19,6 +19,7 @@ from paramspec import (
     Params,
     Section,
     assignments,
+    differences,
     help_text,
     markdown,
     param,
@@ -162,6 +163,12 @@ def test_a_key_moved_into_a_section_is_named_with_its_new_dotted_key():
         assert error(Demo.from_dict, {"name": "a", **data}, "--set", coerce=True) == f"--set: {text}"
     assert error(Demo.from_dict, {"stage": {"stage": 1}}, base=Demo(name="a")).startswith(
         "key 'stage.stage' is unknown (known: enabled,")  # the hint looks below the section, not above
+
+
+def test_differences_name_the_changed_keys_dotted():
+    a = Demo(name="a")
+    b = Demo.from_dict({"frames": 7, "stage": {"model": "isotropic"}}, base=a)
+    assert differences(b, a) == {"frames": 7, "stage.model": "isotropic"} and differences(a, a) == {}
 
 
 def test_null_is_a_value_in_command_line_text_where_the_key_allows_it():

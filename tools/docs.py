@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 
 import scenes
-from paramspec import Section, markdown, schema
+from odometry.config import OdometryConfig, variant_changes
+from paramspec import Section, markdown, schema, value_text
 from scenes.params import CommonParams
 from simlidar.formats.atomic import atomic_write_text
 from simlidar.sensor import SENSOR_FILE
@@ -23,7 +24,7 @@ PAGE = Path(__file__).resolve().parents[1] / "docs" / "parameters.md"
 
 
 def parameters_page() -> str:
-    """The Markdown page: every scene's parameters, a sensor file's keys, a sweep spec's keys."""
+    """The Markdown page: every scene's parameters, a sensor file's, a sweep spec's and an odometry config's keys."""
     common = {p.name: p for p in schema(CommonParams).members}
     out = [
         "# Parameters",
@@ -32,9 +33,10 @@ def parameters_page() -> str:
         "",
         "Every key below is declared once, in code, with its type, default, unit and range; the checks, their",
         "one-line errors (`FILE: key 'KEY' PROBLEM`), `salo scenes NAME`, `salo sensors --keys`, `salo sweep",
-        "--help` and this page are made from those declarations. Ranges are inclusive `[a, b]` or exclusive",
-        "`(a, b)`; a list key's range holds for each entry. Units: metres, seconds and degrees as the key's",
-        "name says (`_m`, `_s`, `_deg`, `_m_s` for m/s, `_pct` for per cent).",
+        "--help`, `salo odometry --keys` and this page are made from those declarations. Ranges are inclusive",
+        "`[a, b]` or exclusive `(a, b)`; a list key's range holds for each entry. Units: metres, seconds and",
+        "degrees as the key's name says (`_m`, `_s`, `_deg`, `_m_s` for m/s, `_pct` for per cent). A dotted key",
+        "(`ncf.enabled`) is a key of a section: a mapping in YAML (`ncf: {enabled: false}`).",
         "",
         "## Scenes",
         "",
@@ -66,6 +68,23 @@ def parameters_page() -> str:
         "`sensors`, `noise_std_m`, `variants`) is one value or a list.",
         "",
         markdown(schema(SweepSpec)),
+        "",
+        "## Odometry configs",
+        "",
+        "`salo odometry --config FILE.yaml` (any subset of the keys: a mapping per stage, `ncf:",
+        "{max_normal_std_deg: 3}`), `--set STAGE.KEY=VALUE` (`salo odometry`, `salo experiment ...`), a sweep",
+        "spec's `odometry` and `configs`. `salo odometry --keys` lists them too. Between keys:",
+        "`clean.min_range_m` < `clean.max_range_m`; `ncf.applies_to` other than `scan` needs `match.target: map`.",
+        "The defaults are the `salo` variant's.",
+        "",
+        markdown(schema(OdometryConfig)),
+        "",
+        "The variants (`--variant`, a sweep's `variants`) change:",
+        "",
+        "| variant | changes to the defaults |",
+        "|---|---|",
+        *[f"| `{name}` | {', '.join(f'`{k}: {value_text(v)}`' for k, v in changes.items()) or 'nothing'} |"
+          for name, changes in variant_changes().items()],
         "",
     ]
     return "\n".join(out)

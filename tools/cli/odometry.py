@@ -14,9 +14,12 @@ def add_commands(sub) -> None:
         description="ICP odometry (the SALO paper's Alg. 1, scan-to-scan, or against a local map) over a "
         "simulated sequence, a real KITTI sequence, a folder of .bin/.ply scans or a ROS 2 bag. Writes KITTI "
         "poses (lidar frame, first = identity), optionally TUM, and a per-frame diagnostics CSV; prints the "
-        "degenerate stretches and their direction.",
+        "degenerate stretches and their direction. --keys lists the parameters (of --config and --set).",
     )
-    p.add_argument("sequence", type=Path, help="sequence folder, or a ROS 2 bag (folder, .mcap or .db3)")
+    p.add_argument("sequence", type=Path, nargs="?", help="sequence folder, or a ROS 2 bag (folder, .mcap or .db3)")
+    p.add_argument("--keys", action="store_true",
+                   help="list the odometry's parameters by stage (type, default, unit, range, meaning) and the "
+                   "variants, and exit")
     p.add_argument("--topic", help="PointCloud2 topic of a bag with several (default: the only one, or /points)")
     from odometry.config import DEFAULT_VARIANT, VARIANTS
 
@@ -37,12 +40,31 @@ def add_commands(sub) -> None:
     p.set_defaults(func=cmd_odometry)
 
 
+def print_keys() -> None:
+    """The odometry's parameters, as declared, and each variant's changes to their defaults."""
+    from odometry.config import DEFAULT_VARIANT, OdometryConfig, variant_changes
+    from paramspec import help_text, value_text
+
+    print("The odometry's parameters, by stage: a config file (--config) holds a mapping per stage\n"
+          "(ncf: {max_normal_std_deg: 3}), --set a dotted key (--set ncf.max_normal_std_deg=3).")
+    print(help_text(OdometryConfig.schema(), header=True))
+    print("\nVariants (--variant): the defaults above are salo's; the others change")
+    for name, changes in variant_changes().items():
+        text = ", ".join(f"{k}: {value_text(v)}" for k, v in changes.items()) or "(nothing)"
+        print(f"  {name:9s} {text}{'   [the default variant]' if name == DEFAULT_VARIANT else ''}")
+
+
 def cmd_odometry(args) -> int:
     from odometry.config import ConfigError, config_from_dict, load_config, variant
     from odometry.pipeline import OdometryError, degenerate_stretches
     from simlidar.dataset import open_sequence
     from tools.runners import RunFiles, run_method
 
+    if args.keys:
+        print_keys()
+        return 0
+    if args.sequence is None:
+        raise CommandError("give a SEQUENCE folder or bag (or --keys to list the parameters)")
     try:
         config = variant(args.variant)
         if args.config:

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from odometry.config import SALO, VARIANTS, OdometryConfig, config_from_dict, variant
-from paramspec import ParamError, Params, param, schema
+from paramspec import ParamError, Params, differences, param, schema
 from simlidar.formats.salo import FORMAT_VERSION
 from simlidar.sensor import LidarModel, SensorError, load_sensor
 from simlidar.yaml_file import read_yaml
@@ -145,21 +145,9 @@ class RunParams:
 
 
 def _config_changes(config: OdometryConfig) -> dict:
-    """The keys where ``config`` differs from its base variant, nested as in YAML (short, readable rows)."""
+    """The dotted keys where ``config`` differs from its base variant (short, readable rows)."""
     base = VARIANTS.get(config.name)
-    return config.to_dict() if base is None else _changes(config.to_dict(), base.to_dict())
-
-
-def _changes(full: dict, ref: dict) -> dict:
-    out = {}
-    for k, v in full.items():
-        if isinstance(v, dict):
-            v = _changes(v, ref.get(k) or {})
-            if v:
-                out[k] = v
-        elif ref.get(k) != v:
-            out[k] = v
-    return out
+    return config.to_dict() if base is None else differences(config, base)
 
 
 def _sweep_name(name: str) -> str | None:
