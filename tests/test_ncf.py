@@ -344,7 +344,7 @@ def simulated_scan():
 
 @pytest.mark.parametrize("model", ["isotropic", "range"])
 def test_kept_normals_are_better_than_rejected_ones_on_a_simulated_scan(simulated_scan, model):
-    """At the recommended c_tau (a 3 deg 1-sigma tilt, see ncf.DEFAULT_C_TAU_RAD2), NCF
+    """At the error-budget c_tau (a 3 deg 1-sigma tilt, see ncf.DEFAULT_C_TAU_RAD2), NCF
     keeps points whose estimated normals are closer to the mesh truth than those it rejects."""
     sensor, scan = simulated_scan
     rng = np.random.default_rng(0)
