@@ -1,9 +1,10 @@
 """One way to declare parameters: a key's type, unit, default, range and help in one place.
 
-Scene parameters (``scenes``), sensor models (``simlidar.sensor``) and sweep
-specs (``tools.sweep.spec``) declare their keys here; the checks and their
-one-line errors, the ``--help`` and ``salo scenes NAME`` listings and
-``docs/parameters.md`` are made from the declarations. This package imports
+Scene parameters (``scenes``), sensor models (``simlidar.sensor``), sweep
+specs (``tools.sweep.spec``) and odometry configs (``odometry.config``) declare
+their keys here; the checks and their one-line errors, the ``--help``, ``--keys``
+and ``salo scenes NAME`` listings and ``docs/parameters.md`` are made from the
+declarations. This package imports
 nothing of the project (and only the standard library), so every package may
 import it.
 
@@ -22,30 +23,36 @@ Declaring: a frozen dataclass deriving from ``Params``, each field a ``param``
     help_text(schema(Budget)), markdown(schema(Budget))
 
 Nested sections: a field declared with ``section(cls, help)`` holds a ``Params``
-of its own; in YAML it is a mapping, on the command line a dotted key
-(``assignments(["ncf.max_normal_std_deg=3"])``), in errors a dotted name. An
-odometry config grouped by stage would read::
+of its own (its switch, by convention, the bool key ``enabled``); in YAML it is a
+mapping, on the command line a dotted key (``assignments(["ncf.max_normal_std_deg=3"])``),
+in errors a dotted name. The odometry config is grouped by stage so
+(``odometry/config.py``, abridged)::
 
     @dataclass(frozen=True)
     class NcfParams(Params):
         section_name = "ncf"
         enabled: bool = param(True, "apply the normal covariance filter")
-        max_normal_std_deg: float = param(5.0, "c_tau: largest std of a kept normal", above=0)
         noise_model: str = param("range", "the noise the filter assumes", choices=("range", "isotropic"))
+        max_normal_std_deg: float = param(5.0, "c_tau: largest std of a kept normal", above=0)
+        applies_to: str = param("scan", "whose normals it judges", choices=("scan", "map", "both"))
 
     @dataclass(frozen=True)
     class OdometryConfig(Params):
+        error = ConfigError
         name: str = param("salo", "the variant's name")
-        voxel_size_m: float = param(0.35, "edge of the voxel grid", above=0)
-        ncf: NcfParams = section(NcfParams, "the normal covariance filter")
+        ncf: NcfParams = section(NcfParams)     # help: the class docstring's first line
+        match: MatchParams = section(MatchParams)
 
         def __post_init__(self) -> None:
             super().__post_init__()  # every key; then the rules between keys:
-            if self.ncf.enabled and self.voxel_size_m > 2:
-                raise ParamError("is too coarse for the NCF", "voxel_size_m")
+            if self.ncf.applies_to != "scan" and self.match.target != "map":
+                raise ConfigError("needs match.target: map", "ncf.applies_to")
 
     OdometryConfig.from_dict({"ncf": {"max_normal_std_deg": 3}}, "my.yaml", base=SALO)
     # my.yaml: key 'ncf.max_normal_std_deg' must be a number > 0 (deg), got -1   (when it is -1)
+    OdometryConfig.from_dict(assignments(["ncf_max_normal_std_deg=3"]), "--set", coerce=True, base=SALO)
+    # --set: key 'ncf_max_normal_std_deg' is unknown; did you mean 'ncf.max_normal_std_deg'?
+    differences(SALO_MAP, SALO)   # {'name': 'salo-map', 'ncf.applies_to': 'map', 'match.target': 'map'}
 """
 
 from .declare import (
