@@ -82,6 +82,10 @@ class FilterParams(_Stage):
     voxel_size_m: float = param(0.35, "edge of the voxel grid whose occupied voxels' centroids are the ICP "
                                 "points", above=0.0)
     normal_neighbours: int = param(12, "k of the kNN normal estimation in the raw scan", min=3)
+    adjacent_ring_reach_m: float | None = param(
+        None, "a kNN neighbourhood on one ring takes the nearer adjacent ring's points within this distance "
+        "instead of its farther half (odometry/scan_lines.py; needs the sensor); null: plain kNN (the paper)",
+        above=0.0)
     max_curvature: float = param(0.05, "PCL curvature above which a point is discarded", min=0.0)
     min_points: int = param(100, "fewer filtered points or matches: the frame is flagged, its pose extrapolated",
                             min=6)

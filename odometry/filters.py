@@ -19,10 +19,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from simlidar.sensor import LidarModel
+
 from .config import OdometryConfig
 from .constraints import restore_constraints
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
-from .normals import estimate_normals
+from .normals import estimate_normals, neighbourhood_pca
+from .scan_lines import widen_one_ring_neighbourhoods
 
 _background: dict[int, ThreadPoolExecutor] = {}
 
@@ -123,11 +126,14 @@ def filter_scan(
     raw_points: np.ndarray,
     config: OdometryConfig,
     raw_rings: np.ndarray | None = None,
-    sensor_range_noise_std_m: float | None = None,
+    sensor: LidarModel | None = None,
     raw_times_s: np.ndarray | None = None,
 ) -> FilteredScan:
-    """Filter a de-skewed raw scan (N, 3) into ICP points with normals (see module doc).
+    """Filter a raw scan (N, 3), as measured or de-skewed, into ICP points with normals (see module doc).
 
+    raw_rings: (N,) int ring per point, or None. sensor: the lidar model (its range noise for the
+    NCF; its rings and azimuth columns for ``filter.adjacent_ring_reach_m``, which also needs the
+    rings), or None. raw_times_s: (N,) firing times, s, or None (the centroids' mean times).
     When the scan's normals are not needed (``scan_normals_needed``), the ICP points are
     the voxel centroids themselves, with nan normals, no rings and no raw k-d tree.
     """
@@ -159,13 +165,20 @@ def filter_scan(
         return FilteredScan(empty, empty, None, None, np.zeros(0), raw_points, tree, centroids, centroid_times,
                             {**counts, "ncf": 0, "curvature": 0}, seconds)
     est = estimate_normals(raw_points, k=k, query_points=centroids, tree=tree)
+    reach = config.filter.adjacent_ring_reach_m
+    if reach is not None and raw_rings is not None and sensor is not None:
+        idx, widened = widen_one_ring_neighbourhoods(raw_points, raw_rings, centroids, est.neighbour_indices,
+                                                     sensor.rings, sensor.columns_per_sweep, reach)
+        if widened.any():
+            est = neighbourhood_pca(raw_points, idx, centroids)
+        counts["widened"] = int(widened.sum())
     seconds["normals"] = time.perf_counter() - t
 
     t = time.perf_counter()
     keep = np.ones(len(centroids), dtype=bool)
     normal_std = np.full(len(centroids), np.nan)
     if config.ncf.enabled and config.ncf.applies_to in ("scan", "both"):
-        noise = ncf_noise_model(config, sensor_range_noise_std_m)
+        noise = ncf_noise_model(config, sensor.range_noise_std_m if sensor is not None else None)
         keep, cov = normal_covariance_filter(
             raw_points[est.neighbour_indices], noise,
             c_tau_rad2=math.radians(config.ncf.max_normal_std_deg) ** 2, pca=est,

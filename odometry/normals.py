@@ -251,15 +251,28 @@ def estimate_normals(
     if k < 3:
         raise ValueError(f"k must be >= 3 to define a plane, got {k}")
     q = cloud if query_points is None else np.asarray(query_points, dtype=np.float64)
-    idx = knn(cloud, q, k, tree=tree, workers=workers)
-    est = local_pca(cloud[idx], query_points=q, viewpoint=viewpoint)
+    return neighbourhood_pca(cloud, knn(cloud, q, k, tree=tree, workers=workers), q, viewpoint)
+
+
+def neighbourhood_pca(
+    cloud: np.ndarray,
+    neighbour_indices: np.ndarray,
+    query_points: np.ndarray,
+    viewpoint: np.ndarray | None = None,
+) -> NormalEstimate:
+    """``local_pca`` of the neighbourhoods ``cloud[neighbour_indices]`` (M, k, 3), keeping the indices.
+
+    cloud: (N, 3) m; neighbour_indices: (M, k) rows of ``cloud``; query_points: (M, 3) m, to orient
+    the normals towards ``viewpoint`` (default: the origin).
+    """
+    est = local_pca(cloud[neighbour_indices], query_points=query_points, viewpoint=viewpoint)
     return NormalEstimate(
         normals=est.normals,
         axes=est.axes,
         scatter_eigenvalues=est.scatter_eigenvalues,
         mean=est.mean,
-        k=k,
-        neighbour_indices=idx,
+        k=neighbour_indices.shape[1],
+        neighbour_indices=neighbour_indices,
     )
 
 

@@ -334,9 +334,10 @@ class Odometry:
         diag.deskewed = deskewing
         seconds["deskew"] = time.perf_counter() - t
 
-        if clean.rings is None and cfg.gcr.enabled and scan_normals_needed(cfg):
+        rings_needed = cfg.gcr.enabled or cfg.filter.adjacent_ring_reach_m is not None
+        if clean.rings is None and rings_needed and scan_normals_needed(cfg) and self.sensor is not None:
             clean.rings = ring_of_points(clean.points, self.sensor)
-        scan = filter_scan(clean.points, cfg, clean.rings, self.sensor.range_noise_std_m if self.sensor else None,
+        scan = filter_scan(clean.points, cfg, clean.rings, self.sensor,
                            raw_times_s=clean.times_s if deskewing else None)
         if filter_first:
             t = time.perf_counter()

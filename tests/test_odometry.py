@@ -31,8 +31,8 @@ def city():
 def register_pair(a, b, name, init):
     """Register scan b (source) to scan a (target) with a variant's filters and rejectors."""
     cfg = variant(name)
-    ta = filter_scan(a.xyz, cfg, a.ring, SENSOR.range_noise_std_m)
-    sb = filter_scan(b.xyz, cfg, b.ring, SENSOR.range_noise_std_m)
+    ta = filter_scan(a.xyz, cfg, a.ring, SENSOR)
+    sb = filter_scan(b.xyz, cfg, b.ring, SENSOR)
     thr = None
     if cfg.gcr.enabled:
         thr = gcr_threshold_m(sb.points, sb.normals, sb.rings, SENSOR)

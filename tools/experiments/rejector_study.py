@@ -216,7 +216,7 @@ def prepare_scan(sequence, k: int, config, sensor) -> PreparedScan:
     times = clean.times_s
     period = float(np.diff(sequence.times[:2])[0]) if len(sequence.times) > 1 else sensor.sweep_period_s
     raw = deskew(clean.points, times, true_motion(sequence.poses, k), period)
-    scan = filter_scan(raw, config, clean.rings, sensor.range_noise_std_m, raw_times_s=times)
+    scan = filter_scan(raw, config, clean.rings, sensor, raw_times_s=times)
     tree = scan.raw_tree if scan.raw_tree is not None else cKDTree(raw)
     truth = truth_of_points(scan.points, tree, rows, frame.fields)
     return PreparedScan(k, raw, rows, scan, truth, tree, frame.fields)

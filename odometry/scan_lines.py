@@ -1,0 +1,105 @@
+"""Neighbourhoods across scan lines: a normal of a spinning lidar's scan needs two of them.
+
+A spinning lidar samples a surface along its rings: densely along a ring (an
+azimuth step of 0.1-0.4 deg), sparsely across them (a ring pitch of 0.3-2 deg).
+On the ground a few metres out, the k nearest raw points of a return are then
+all points of its own ring: they lie on that ring's cone, their best plane
+contains the beams, and its normal is perpendicular to the beams, not to the
+ground (tilted by up to the beam's depression). A pitch or a climb of the
+sensor moves ground returns along their own beams, which such a normal cannot
+see, so scan-to-scan registration turns the tilt into a pitch bias every frame
+(vertical drift); the sensor-aware NCF, seeing that the noise alone could
+explain the neighbourhood's second axis, rejects those normals instead, and
+the ground no longer constrains the height.
+
+``widen_one_ring_neighbourhoods`` gives such a neighbourhood a second scan
+line: its farther half is replaced by the points of the nearer adjacent ring
+closest in azimuth, found in a range image of the raw scan (a cell per ring
+and azimuth column), when they lie within a given distance of the query
+point. Two lines a gap apart span the plane between them, and the NCF's
+covariance of that normal (noise along each point's beam) is then small where
+the plane is well determined. Neighbourhoods that already hold two rings keep
+their k nearest neighbours (the paper's kNN).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def azimuth_columns(points: np.ndarray, n_columns: int) -> np.ndarray:
+    """(N,) int column in [0, n_columns) of each (N, 3) point's azimuth ``atan2(y, x)`` (sensor frame)."""
+    az = np.arctan2(points[:, 1], points[:, 0])
+    return np.floor((az + np.pi) * (n_columns / (2.0 * np.pi))).astype(np.int64) % n_columns
+
+
+def range_image(rings: np.ndarray, points: np.ndarray, n_rings: int, n_columns: int) -> np.ndarray:
+    """(n_rings, n_columns) int: the row of a raw point in each (ring, azimuth column) cell, -1 where none.
+
+    rings: (N,) int in [0, n_rings), ring 0 the lowest; points: (N, 3) as measured, sensor frame, m.
+    Two points in one cell (a column finer than the sensor's, or laser azimuth offsets): one is kept.
+    """
+    rings = np.asarray(rings, dtype=np.int64)
+    if len(rings) and (rings.min() < 0 or rings.max() >= n_rings):
+        raise ValueError(f"ring {int(rings.max()) if rings.max() >= n_rings else int(rings.min())} is not "
+                         f"one of the sensor's {n_rings} rings")
+    image = np.full((n_rings, n_columns), -1, dtype=np.int64)
+    image[rings, azimuth_columns(points, n_columns)] = np.arange(len(rings))
+    return image
+
+
+def widen_one_ring_neighbourhoods(
+    cloud: np.ndarray,
+    rings: np.ndarray,
+    query_points: np.ndarray,
+    neighbour_indices: np.ndarray,
+    n_rings: int,
+    n_columns: int,
+    max_distance_m: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """kNN neighbourhoods that hold one ring only: the farther half replaced by the nearer adjacent ring's points.
+
+    Args:
+        cloud: (N, 3) the raw scan as measured (sensor frame: azimuths are taken about its z axis), m.
+        rings: (N,) int ring of each raw point, 0 the lowest.
+        query_points: (M, 3) the points the neighbourhoods belong to (e.g. voxel centroids), m.
+        neighbour_indices: (M, k) rows of ``cloud``, nearest first (``normals.knn``).
+        n_rings, n_columns: the range image's size: the sensor's rings and azimuth columns per sweep.
+        max_distance_m: the adjacent ring's points must all lie this close to the query point, m.
+
+    Returns:
+        (M, k) neighbour rows (a copy; the k - k // 2 nearest of a widened neighbourhood stay, its last
+        k // 2 are the adjacent ring's points nearest in azimuth), and (M,) bool: which were widened.
+    """
+    idx = np.array(neighbour_indices, dtype=np.intp)
+    m, k = idx.shape
+    half = k // 2
+    own = np.asarray(rings)[idx]
+    one_ring = np.flatnonzero(np.all(own == own[:, :1], axis=1))
+    widened = np.zeros(m, dtype=bool)
+    if len(one_ring) == 0 or half == 0:
+        return idx, widened
+    image = range_image(rings, cloud, n_rings, n_columns)
+    q = np.asarray(query_points, dtype=np.float64)[one_ring]
+    column = azimuth_columns(q, n_columns)
+    # the cells of a ring around the query's column, nearest column first: 0, -1, +1, -2, +2, ...
+    offsets = np.array([0] + [s * i for i in range(1, half + 1) for s in (-1, 1)])
+    columns = (column[:, None] + offsets[None, :]) % n_columns
+    best_rows = np.zeros((len(one_ring), half), dtype=np.intp)
+    best_reach = np.full(len(one_ring), np.inf)
+    for step in (-1, 1):
+        adjacent = own[one_ring, 0] + step
+        exists = (adjacent >= 0) & (adjacent < n_rings)
+        cells = image[np.clip(adjacent, 0, n_rings - 1)[:, None], columns]
+        cells[~exists] = -1
+        # the first ``half`` filled cells in that order (a stable sort moves empty cells last)
+        first = np.argsort(cells < 0, axis=1, kind="stable")[:, :half]
+        rows = np.take_along_axis(cells, first, axis=1)
+        reach = np.linalg.norm(cloud[np.maximum(rows, 0)] - q[:, None, :], axis=2).max(axis=1)
+        reach[(rows < 0).any(axis=1)] = np.inf
+        nearer = reach < best_reach
+        best_rows[nearer], best_reach[nearer] = rows[nearer], reach[nearer]
+    accept = best_reach <= max_distance_m
+    idx[one_ring[accept], k - half:] = best_rows[accept]
+    widened[one_ring[accept]] = True
+    return idx, widened
