@@ -24,7 +24,6 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.spatial.transform import Rotation
 
 # Body-motion gains of a passenger car (typical figures): pitch per unit
 # longitudinal acceleration, roll per unit lateral acceleration.
@@ -191,8 +190,22 @@ class PathTrajectory:
         scale = np.minimum(1.0, v / max(self.speed_m_s, 1e-6))
         osc = np.sin(2 * np.pi * self._osc_freq[None] * t[:, None, None] + self._osc_phase[None]).sum(-1)
         osc = osc * 0.5 * self._osc_amp[None] * scale[:, None]  # (n, 3): heave, pitch, roll
-        R = Rotation.from_euler("ZYX", np.stack([yaw, pitch + osc[:, 1], roll + osc[:, 2]], 1)).as_matrix()
+        R = _rotation_zyx(yaw, pitch + osc[:, 1], roll + osc[:, 2])
         T = np.tile(np.eye(4), (len(t), 1, 1))
         T[:, :3, :3] = R
         T[:, :3, 3] = p + R[:, :, 2] * (self.mount_height_m + osc[:, 0])[:, None]
         return T
+
+
+def _rotation_zyx(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """(n,) yaw, pitch, roll, rad -> (n, 3, 3) ``Rz(yaw) Ry(pitch) Rx(roll)`` (intrinsic Z-Y-X).
+
+    The same rotations as scipy's ``Rotation.from_euler("ZYX", ...)`` (to rounding, ~1e-16), written
+    out in numpy: scipy's per-element conversion took 17 ms for a sweep's 4,500 firing poses.
+    """
+    cy, sy, cp, sp, cr, sr = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    R = np.empty((len(yaw), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -sp, cp * sr, cp * cr
+    return R

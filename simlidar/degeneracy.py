@@ -22,7 +22,16 @@ import numpy as np
 
 def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """(N, 3) points and (N, 3) unit normals -> (6, 6) sum of J^T J (translation, rotation)."""
-    J = np.hstack([normals, np.cross(points, normals)])  # (N, 6)
+    p, n = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+    J = np.empty((len(p), 6))
+    J[:, :3] = n
+    # p x n written out (np.cross and np.hstack allocate and copy twice as much)
+    np.multiply(p[:, 1], n[:, 2], out=J[:, 3])
+    J[:, 3] -= p[:, 2] * n[:, 1]
+    np.multiply(p[:, 2], n[:, 0], out=J[:, 4])
+    J[:, 4] -= p[:, 0] * n[:, 2]
+    np.multiply(p[:, 0], n[:, 1], out=J[:, 5])
+    J[:, 5] -= p[:, 1] * n[:, 0]
     return J.T @ J
 
 

@@ -46,15 +46,17 @@ def simulate_sequence(
     ``SensorInsideGeometry`` before anything is written; otherwise one warning
     is logged with the evidence, the simulation goes on, and the manifest's
     ``inside_check`` records it. ``info`` goes into the manifest (scene, mesh,
-    parameters). ``on_frame(k, scan)`` is called after each frame (progress
-    bars). Returns the finished folder.
+    parameters). ``on_frame(k, scan)`` is called after each frame is simulated
+    and queued for writing (progress bars); a background thread writes it while
+    the next is simulated. Returns the finished folder.
     """
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
     sim = simulator or SweepSimulator(world, sensor, seed=seed, motion_distortion=motion_distortion)
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
-    writer = SequenceWriter(out_dir, sensor, {}, force=force)  # refuses an existing folder now
+    writer = SequenceWriter(out_dir, sensor, {}, force=force, n_objects=len(world.object_labels))  # refuses an
+    # existing folder now
     strict = world.normals_reliable if strict_inside is None else bool(strict_inside)
     inside_record = check_poses(sim.raycaster, poses, strict, source=world.source)
     manifest_info = {

@@ -1,7 +1,15 @@
-"""Benchmark of the simulator: sweep speed against the bare Embree call, and streaming memory.
+"""Benchmark of the simulator: sweep speed against the bare Embree call, writing to disk, and memory.
 
-    python -m tools.bench_sim                 # sweep speed, salo32, >= 100k-triangle world
+    python -m tools.bench_sim                 # sweep speed, salo32, >= 100k-triangle world, and
+                                              # end to end: salo simulate --scene city --seed 3 --frames 100
+    python -m tools.bench_sim --e2e-frames 0  # skip the end-to-end run
     python -m tools.bench_sim --memory 1000   # also a 1000-frame sequence: peak RSS stays flat
+
+The end-to-end run calls ``tools.runners.simulate_scene``, the function behind
+``salo simulate --scene``, writing the sequence (scans and truth) to a temporary
+folder, and casts the same sequence's rays (each column from its own firing
+pose) with the bare 2-thread Embree call in the same run: sweeps/s of both, the
+ratio, and bytes on disk per return.
 
 Prints figures; it asserts nothing (speed is measured here, never in tests).
 """
@@ -109,6 +117,58 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
     print(f"  sweep time / bare cast (1 thread):  {t_sweep / t_bare1:.2f}x")
 
 
+def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, tmp_root: str | None) -> None:
+    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast."""
+    from tools.runners import simulate_scene
+    from tools.worlds import build_scene_world
+
+    sensor = load_sensor(sensor_name)
+    scene = build_scene_world(scene_name, seed, {})
+    marks: dict[int, float] = {}
+
+    def on_frame(k, scan):
+        marks.setdefault(k, time.perf_counter())
+
+    with tempfile.TemporaryDirectory(dir=tmp_root) as tmp:
+        out = Path(tmp) / "seq"
+        t0 = time.perf_counter()
+        done = simulate_scene(scene, sensor, out, frames, seed=seed, on_frame=on_frame)
+        t_end = time.perf_counter()
+        sizes = {sub: sum(p.stat().st_size for p in (out / sub).iterdir()) for sub in ("velodyne", "sidecar")}
+        import json
+
+        returns = json.loads((out / "manifest.json").read_text())["points"]
+    # The same rays, bare: each column from its firing pose, 2 threads, no noise, no truth, nothing written.
+    sim = SweepSimulator(scene.world, sensor, seed=seed)
+    rc = sim.raycaster
+    t_frames = np.arange(frames) * sensor.sweep_period_s
+    rays = []
+    for t in t_frames[:: max(1, frames // 10)]:
+        T = scene.trajectory.pose_at(t + sim._times_unique)
+        R = T[sim._ray_time_idx, :3, :3]
+        d = np.einsum("nij,nj->ni", R, sim._dir_local)
+        o = T[sim._ray_time_idx, :3, 3] - rc.offset
+        rays.append((np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)))
+    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
+    rc.cast_raw(*rays[0], dist)  # warm up
+    t = time.perf_counter()
+    for o32, d32 in rays:
+        rc.cast_raw(o32, d32, dist)
+    t_bare = (time.perf_counter() - t) / len(rays)
+    streaming = (frames - 1) / (t_end - marks[0])  # first sweep done -> folder committed
+    total = frames / done.seconds
+    per_return = {k: v / returns for k, v in sizes.items()}
+    print(f"end to end: salo simulate --scene {scene_name} --seed {seed} --frames {frames} --sensor {sensor.name} "
+          f"({returns / frames:.0f} returns per sweep)")
+    print(f"  bare embreex, {rc.threads} threads, same rays      {1 / t_bare:6.1f} sweeps/s")
+    print(f"  simulate, truth written (streaming)          {streaming:6.1f} sweeps/s   "
+          f"{1 / (streaming * t_bare):.2f}x the bare cast's time")
+    print(f"  simulate, whole call (BVH, inside check)     {total:6.1f} sweeps/s   "
+          f"({t_end - t0:.1f} s, of which {marks[0] - t0:.1f} s before the first sweep was done)")
+    print(f"  on disk per return: scan {per_return['velodyne']:.1f} B + truth {per_return['sidecar']:.1f} B = "
+          f"{sum(per_return.values()):.1f} B")
+
+
 def bench_memory(world: World, sensor_name: str, frames: int) -> None:
     sensor = load_sensor(sensor_name)
     rss = {}
@@ -135,11 +195,17 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--memory", type=int, default=0, help="frames of the streaming-memory run (0: skip)")
     ap.add_argument("--memory-sensor", default="vlp16")
+    ap.add_argument("--e2e-frames", type=int, default=100, help="frames of the end-to-end run (0: skip)")
+    ap.add_argument("--e2e-scene", default="city")
+    ap.add_argument("--e2e-seed", type=int, default=3)
+    ap.add_argument("--tmp", help="folder for the end-to-end sequence (default: the system's temporary folder)")
     args = ap.parse_args()
     t = time.perf_counter()
     world = bench_world()
     print(f"world: {len(world.faces)} triangles, built in {time.perf_counter() - t:.2f} s")
     bench_sweep(world, args.sensor, args.repeats)
+    if args.e2e_frames:
+        bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp)
     if args.memory:
         bench_memory(world, args.memory_sensor, args.memory)
 

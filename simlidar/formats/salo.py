@@ -1,12 +1,12 @@
 """The simulator's sequence folder: the KITTI odometry layout plus per-point truth and a manifest.
 
-The layout (``kind == "salo"``)::
+The layout (``kind == "salo"``), format version 2::
 
     DIR/
       velodyne/000000.bin   float32 x y z intensity per point (KITTI odometry format)
-      sidecar/000000.npy    structured array, one record per point of the .bin, same order:
-                            ring, azimuth_index, time_s, range_m, true_range_m, true_xyz,
-                            normal, object_id (see ``simlidar.sweep.SIDECAR_DTYPE``)
+      sidecar/000000.truth  the compact truth of every point of the .bin, same order: firing
+                            index, true range, octahedral normal, object id, and the sensor's
+                            motion during the sweep (``simlidar.formats.truth``: 14 bytes a return)
       poses.txt             3x4 row-major T_first_lidar per frame (line 0 is identity)
       times.txt             sweep start time per frame, s (first is 0)
       sensor.yaml           the sensor model (simlidar.sensor keys)
@@ -14,14 +14,26 @@ The layout (``kind == "salo"``)::
                             returns' true normals (``simlidar.degeneracy``)
       manifest.json         written last: parameters, versions, frame count, sha256 per file
 
+Format version 1 (sequences written before) had ``sidecar/000000.npy`` instead: a
+structured array of 50 bytes a return (``simlidar.formats.truth.SIDECAR_DTYPE``).
+``open_salo`` reads both, told apart by the manifest's ``format_version``; either
+way a frame's ``fields`` are that version-1 record, rebuilt from the compact truth
+for version 2 (within the bounds ``simlidar.formats.truth`` states).
+
 ``SequenceWriter`` builds it in a ``simlidar.formats.atomic.StagedFolder`` (a
 hidden sibling holding an ``INCOMPLETE`` marker, renamed into place only when
-every file and the manifest are on disk); ``open_salo`` reads it back.
+every file and the manifest are on disk), each frame encoded and written by a
+background thread while the caller simulates the next (a queue of two frames
+bounds the memory), each file in one write, its sha256 taken from the bytes in
+memory; ``open_salo`` reads it back.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import queue
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -30,12 +42,15 @@ from .. import __version__, se3
 from ..degeneracy import CSV_HEADER, csv_row, degeneracy
 from ..sensor import LidarModel, load_sensor_file
 from ..sequence import DatasetError
+from . import truth
 from .atomic import StagedFolder, sha256_file
-from .kitti import format_kitti_poses, format_times, read_kitti_poses, read_times, write_bin
+from .kitti import format_kitti_poses, format_times, read_kitti_poses, read_times
 from .scan_folders import Sequence, check_bin_sizes
 
 FORMAT_NAME = "salo-sequence"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+FORMAT_VERSIONS = (1, 2)  # what the reader reads
+SIDECAR_SUFFIX = {1: ".npy", 2: ".truth"}
 SIDECAR_FIELDS = (
     "ring",
     "azimuth_index",
@@ -52,51 +67,115 @@ SIDECAR_FIELDS = (
 class SequenceWriter:
     """Streams frames of a simulated sequence to disk and commits it atomically.
 
-    Use as a context manager; ``add`` writes each frame as it comes (memory stays
-    flat), leaving the context without error renames the finished folder into
-    place, an exception removes the partial folder. An existing ``out_dir`` is
-    only replaced with ``force=True`` (and only once the new one is complete).
+    Use as a context manager; ``add`` hands each frame to a background writer
+    thread (at most ``queue_frames`` frames wait, so memory stays flat) and
+    returns; leaving the context without error waits for the writer and renames
+    the finished folder into place, an exception (in the caller or the writer)
+    removes the partial folder. An existing ``out_dir`` is only replaced with
+    ``force=True`` (and only once the new one is complete).
+
+    n_objects: the world's object count, which sets the width of the object ids
+    (1, 2 or 4 bytes; None: 4). format_version: 2 (compact truth, the default) or
+    1 (the old ``.npy`` sidecar, kept to test the reader of old sequences).
     """
 
-    def __init__(self, out_dir: str | Path, sensor: LidarModel, info: dict, force: bool = False):
+    def __init__(self, out_dir: str | Path, sensor: LidarModel, info: dict, force: bool = False,
+                 n_objects: int | None = None, format_version: int = FORMAT_VERSION, queue_frames: int = 2):
+        if format_version not in FORMAT_VERSIONS:
+            raise ValueError(f"format_version must be one of {FORMAT_VERSIONS}, got {format_version}")
         self.out_dir = Path(out_dir)
         self._stage = StagedFolder(self.out_dir, force)  # refuses an existing folder now
         self.tmp = self._stage.path
         self.sensor = sensor
         self.info = info
+        self.format_version = format_version
+        self.id_bytes = 4 if n_objects is None else truth.object_id_bytes(n_objects)
         self._poses: list[np.ndarray] = []
         self._times: list[float] = []
         self._checksums: dict[str, str] = {}
-        self._degeneracy_rows: list[str] = []
+        self._degeneracy_rows: dict[int, str] = {}
         self._points = 0
+        self._bytes = {"velodyne": 0, "sidecar": 0}
+        self._queue: queue.Queue = queue.Queue(maxsize=max(1, queue_frames))
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
 
     def __enter__(self) -> SequenceWriter:
         self._stage.__enter__()
         (self.tmp / "velodyne").mkdir()
         (self.tmp / "sidecar").mkdir()
+        self._thread = threading.Thread(target=self._work, name=f"write {self.out_dir.name}", daemon=True)
+        self._thread.start()
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
+            self._stop()
             if exc_type is None:
+                if self._error is not None:
+                    raise self._error
                 self._commit()
         finally:
-            self._stage.__exit__(exc_type, exc, tb)
+            self._stage.__exit__(exc_type, exc, tb)  # removes the work folder unless committed
 
     def add(self, scan, T_world_lidar: np.ndarray, time_s: float) -> None:
-        """Write one frame: a ``simlidar.sweep.Scan`` and its reference pose and time."""
+        """Queue one frame for writing: a ``simlidar.sweep.Scan`` (not changed afterwards) and its reference
+        pose and time. Raises the writer thread's error, if it had one."""
+        if self._error is not None:
+            raise self._error
+        if self._thread is None:
+            raise RuntimeError("SequenceWriter.add outside its with-block")
         k = len(self._poses)
-        name = f"{k:06d}"
-        bin_path = self.tmp / "velodyne" / f"{name}.bin"
-        car_path = self.tmp / "sidecar" / f"{name}.npy"
-        write_bin(bin_path, scan.xyz, scan.intensity)
-        np.save(car_path, scan.sidecar(), allow_pickle=False)
-        self._checksums[f"velodyne/{name}.bin"] = sha256_file(bin_path)
-        self._checksums[f"sidecar/{name}.npy"] = sha256_file(car_path)
         self._poses.append(np.asarray(T_world_lidar, dtype=float))
         self._times.append(float(time_s))
         self._points += len(scan.xyz)
-        self._degeneracy_rows.append(csv_row(k, degeneracy(scan.true_xyz, scan.normal)))
+        self._queue.put((k, scan))
+
+    @property
+    def bytes_written(self) -> dict[str, int]:
+        """Bytes of the frames' files so far: ``velodyne`` (scans) and ``sidecar`` (truth)."""
+        return dict(self._bytes)
+
+    # -------------------------------------------------------- the writer thread
+    def _stop(self) -> None:
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
+            self._thread = None
+
+    def _work(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self._error is None:  # after an error, keep taking frames so that add() never blocks
+                try:
+                    self._write_frame(*item)
+                except BaseException as exc:  # handed to the caller's thread by add() / __exit__
+                    self._error = exc
+
+    def _write_frame(self, k: int, scan) -> None:
+        name = f"{k:06d}"
+        points = np.empty((len(scan.xyz), 4), dtype="<f4")
+        points[:, :3] = scan.xyz
+        points[:, 3] = scan.intensity
+        if self.format_version == 1:
+            import io
+
+            buf = io.BytesIO()
+            np.save(buf, scan.sidecar(), allow_pickle=False)
+            car = buf.getvalue()
+        else:
+            knots = None if scan.motion is None else truth.motion_knots(scan.motion)
+            ray = np.asarray(scan.azimuth_index, dtype=np.int64) * self.sensor.rings + scan.ring
+            car = truth.encode(ray, scan.true_range_m, scan.normal, scan.object_id, knots, self.id_bytes)
+        for rel, data in ((f"velodyne/{name}.bin", memoryview(points).cast("B")),
+                          (f"sidecar/{name}{SIDECAR_SUFFIX[self.format_version]}", car)):
+            with open(self.tmp / rel, "wb", buffering=0) as fh:
+                fh.write(data)
+            self._checksums[rel] = hashlib.sha256(data).hexdigest()
+            self._bytes[rel.split("/")[0]] += len(data)
+        self._degeneracy_rows[k] = csv_row(k, degeneracy(scan.true_xyz, scan.normal))
 
     def _commit(self) -> None:
         if not self._poses:
@@ -108,14 +187,15 @@ class SequenceWriter:
             "poses.txt": format_kitti_poses(rel),
             "times.txt": format_times(self._times),
             "sensor.yaml": self.sensor.to_yaml(),
-            "degeneracy.csv": CSV_HEADER + "\n" + "".join(r + "\n" for r in self._degeneracy_rows),
+            "degeneracy.csv": CSV_HEADER + "\n" + "".join(self._degeneracy_rows[k] + "\n"
+                                                          for k in sorted(self._degeneracy_rows)),
         }
         for fname, text in texts.items():
             (self.tmp / fname).write_text(text)
             self._checksums[fname] = sha256_file(self.tmp / fname)
         manifest = {
             "format": FORMAT_NAME,
-            "format_version": FORMAT_VERSION,
+            "format_version": self.format_version,
             "package_version": __version__,
             "frames": len(self._poses),
             "points": self._points,
@@ -144,9 +224,13 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
         raise DatasetError(f"{path / 'manifest.json'}: cannot read manifest ({exc})") from None
     if manifest.get("format") != FORMAT_NAME:
         raise DatasetError(f"{path / 'manifest.json'}: not a {FORMAT_NAME} manifest")
+    version = manifest.get("format_version")
+    if version not in FORMAT_VERSIONS:
+        raise DatasetError(f"{path / 'manifest.json'}: format_version {version!r} is not one this version reads "
+                           f"({', '.join(map(str, FORMAT_VERSIONS))}; written by a newer salo-bench?)")
     n = int(manifest.get("frames", -1))
     scans = [path / "velodyne" / f"{k:06d}.bin" for k in range(n)]
-    cars = [path / "sidecar" / f"{k:06d}.npy" for k in range(n)]
+    cars = [path / "sidecar" / f"{k:06d}{SIDECAR_SUFFIX[version]}" for k in range(n)]
     missing = [p for p in scans + cars if not p.is_file()]
     if missing:
         raise DatasetError(f"{missing[0]}: missing, the manifest lists {n} frames")
@@ -157,9 +241,17 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
         raise DatasetError(
             f"{path}: manifest says {n} frames, poses.txt has {len(gt)}, times.txt {len(times)}"
         )
-    if sensor is None:
-        sensor = load_sensor_file(path / "sensor.yaml")
-    return Sequence(path, "salo", scans, sensor, gt, times, manifest, cars)
+    own = load_sensor_file(path / "sensor.yaml")  # the firing table the truth was written with
+    reader = None
+    if version == 2:
+        def reader(car: Path, xyz: np.ndarray) -> np.ndarray:
+            try:
+                data = car.read_bytes()
+            except OSError as exc:
+                raise DatasetError(f"{car}: cannot read truth ({exc.strerror})") from None
+            return truth.decode(data, xyz, own, where=car)
+    return Sequence(path, "salo", scans, sensor or own, gt, times, manifest, cars, read_sidecar=reader)
 
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "SIDECAR_FIELDS", "SequenceWriter", "is_salo", "open_salo"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FORMAT_VERSIONS", "SIDECAR_FIELDS", "SequenceWriter", "is_salo",
+           "open_salo"]

@@ -14,7 +14,7 @@ The simulator's own folder layout is ``simlidar.formats.salo``.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -32,13 +32,16 @@ class Sequence:
 
     Attributes:
         path: the folder. kind: "salo", "kitti" or "scans".
-        scan_files: one ``.bin`` or ``.ply`` per frame. sidecar_files: one ``.npy`` per frame, or None.
+        scan_files: one ``.bin`` or ``.ply`` per frame. sidecar_files: one per frame, or None: ``.npy``
+            structured arrays, or whatever ``read_sidecar(file, xyz)`` turns into one (given the
+            frame's (N, 3) float32 points; the simulator's compact truth).
         sensor: LidarModel or None. poses: (N, 4, 4) ``T_first_lidar`` or None.
         times: (N,) s or None. manifest: dict (simulated sequences) or {}.
     """
 
     def __init__(self, path: Path, kind: str, scan_files: list[Path], sensor, poses, times,
-                 manifest: dict | None = None, sidecar_files: list[Path] | None = None):
+                 manifest: dict | None = None, sidecar_files: list[Path] | None = None,
+                 read_sidecar: Callable[[Path, np.ndarray], np.ndarray] | None = None):
         self.path = path
         self.kind = kind
         self.scan_files = scan_files
@@ -47,6 +50,7 @@ class Sequence:
         self.poses = poses
         self.times = times
         self.manifest = manifest or {}
+        self.read_sidecar = read_sidecar
 
     def __len__(self) -> int:
         return len(self.scan_files)
@@ -67,10 +71,13 @@ class Sequence:
         fields = None
         if self.sidecar_files is not None:
             car = self.sidecar_files[k]
-            try:
-                fields = np.load(car, allow_pickle=False)
-            except (OSError, ValueError) as exc:
-                raise DatasetError(f"{car}: cannot read sidecar ({exc})") from None
+            if self.read_sidecar is not None:
+                fields = self.read_sidecar(car, data[:, :3])
+            else:
+                try:
+                    fields = np.load(car, allow_pickle=False)
+                except (OSError, ValueError) as exc:
+                    raise DatasetError(f"{car}: cannot read sidecar ({exc})") from None
             if len(fields) != len(data):
                 raise DatasetError(
                     f"{car}: {len(fields)} records but {f.name} has {len(data)} points"
