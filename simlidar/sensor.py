@@ -85,6 +85,19 @@ class LidarModel(Params):
                                       "azimuth (0: off)", min=0.0)
     dropout_probability: float = param(0.0, "chance that a return is lost (0: off)", min=0.0, below=1.0)
     intensity_range_ref_m: float = param(10.0, "range beyond which intensity falls off as 1/r^2", above=0.0)
+    beam_divergence_deg: float = param(0.0, "full angle of the beam's cone: > 0 casts beam_subrays sub-rays over it "
+                                       "and reports an echo of their hits (mixed pixels at depth edges) (0: off)",
+                                       min=0.0, max=5.0)
+    beam_subrays: int = param(16, "sub-rays over the divergence cone (a sunflower pattern: equal areas)", min=2,
+                              max=256)
+    return_mode: str = param("strongest", "the echo a divergent beam reports: strongest (most power), first "
+                             "(nearest) or last (farthest)", choices=("strongest", "first", "last"))
+    echo_separation_m: float = param(0.5, "sub-ray hits nearer each other in range than this form one echo, at "
+                                     "their power-weighted mean range (the pulse's range resolution)", min=0.0)
+    incidence_noise_max_factor: float = param(1.0, "range noise std grows as range_noise_std_m / cos(incidence), up "
+                                              "to this factor (1: off)", min=1.0)
+    intensity_incidence_exponent: float = param(1.0, "k in intensity = reflectance x |cos incidence|^k x falloff "
+                                                "(1: Lambertian)", min=0.0)
     description: str = param("", "free text")
     source: str = param("", "where the figures come from")
 
@@ -172,6 +185,18 @@ class LidarModel(Params):
         mid = 0.5 * (el[1:] + el[:-1])
         return np.searchsorted(mid, np.asarray(elevation_rad)).astype(np.int32)
 
+    def beam_pattern_rad(self) -> np.ndarray:
+        """(beam_subrays, 2) angular offsets of the sub-rays from the beam's axis, rad: (across, up).
+
+        A sunflower (Vogel) pattern: sub-ray s at radius ``half * sqrt((s + 0.5) / S)`` and angle
+        ``s * 137.5 deg``, so each covers an equal share of the cone's disc (half: half the divergence).
+        """
+        S = self.beam_subrays
+        k = np.arange(S)
+        r = 0.5 * math.radians(self.beam_divergence_deg) * np.sqrt((k + 0.5) / S)
+        phi = k * math.pi * (3.0 - math.sqrt(5.0))
+        return np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+
     def with_overrides(self, **changes) -> LidarModel:
         """A new validated model with some fields replaced (e.g. ``range_noise_std_m``)."""
         return dataclasses.replace(self, **changes)
@@ -194,6 +219,13 @@ class LidarModel(Params):
             "dropout_probability": self.dropout_probability,
             "intensity_range_ref_m": self.intensity_range_ref_m,
         }
+        # The effects below are written only when on, so that files of sensors without them stay as they were.
+        defaults = {p.name: p.default for p in schema(LidarModel).members}
+        for key in ("beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m",
+                    "incidence_noise_max_factor", "intensity_incidence_exponent"):
+            if getattr(self, key) != defaults[key] or (key in ("beam_subrays", "return_mode", "echo_separation_m")
+                                                        and self.beam_divergence_deg > 0):
+                out[key] = getattr(self, key)
         if self.azimuth_offsets_deg is not None:
             out["azimuth_offsets_deg"] = list(self.azimuth_offsets_deg)
         if self.description:
@@ -235,7 +267,8 @@ def _file_keys() -> Section:
     order = ["name", rings, "azimuth_step_deg", "rotation_hz", "range_noise_std_m", "min_range_m", "max_range_m",
              angles, pitch, lowest, "azimuth_offsets_deg", "laser_interval_s", "start_azimuth_deg",
              "ring_bias_std_m", "angular_jitter_deg", "dropout_probability", "intensity_range_ref_m",
-             "description", "source"]
+             "beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m", "incidence_noise_max_factor",
+             "intensity_incidence_exponent", "description", "source"]
     members = tuple(model[k] if isinstance(k, str) else k for k in order)
     return Section("sensor", members, "a spinning lidar's rings, timing, ranges and noise", LidarModel)
 

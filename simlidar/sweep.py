@@ -13,14 +13,27 @@ its surface normal, in the reference frame. With motion distortion off, all
 rays leave from the reference pose and the two frames coincide.
 
 Noise model per return: measured range = true range + ring bias (fixed per
-laser, optional) + N(0, range_noise_std_m^2); the point is placed along the
-beam at the measured range. Returns whose measured range falls outside
-[min_range_m, max_range_m] are dropped, as are random dropouts (optional).
-Misses produce no return.
+laser, optional) + N(0, sigma^2); the point is placed along the beam at the
+measured range. sigma is ``range_noise_std_m``, or with
+``incidence_noise_max_factor`` F > 1, ``range_noise_std_m * min(1 / |cos a|, F)``
+(``a`` the angle of incidence: the footprint stretches along a tilted surface).
+Returns whose measured range falls outside [min_range_m, max_range_m] are
+dropped, as are random dropouts (optional). Misses produce no return.
 
-Intensity model (documented, not calibrated): ``reflectance(label) * |cos a| *
-min(1, (r_ref / r)^2)``, with ``a`` the angle of incidence and ``r_ref`` the
-sensor's ``intensity_range_ref_m``; values in [0, 1].
+Beam divergence (``beam_divergence_deg`` > 0): each beam is a cone of
+``beam_subrays`` sub-rays; where the beam's axis hits something, the range
+before noise is an echo of the sub-rays' hits (``_echo_range``): at a depth
+edge, sub-rays on the near and the far surface mix into a range between them
+when they are within ``echo_separation_m``, else ``return_mode`` picks the
+first, last or strongest echo. The truth (true range, point, normal, object)
+stays the axis ray's hit, so the mixed-pixel error is measured minus true
+range. A beam whose axis misses returns nothing (no blooming past silhouettes).
+
+Intensity model (documented, not calibrated): ``reflectance(object) * |cos a|^k *
+min(1, (r_ref / r)^2)``, with ``a`` the angle of incidence, ``k`` the sensor's
+``intensity_incidence_exponent`` (1: Lambertian), ``r_ref`` its
+``intensity_range_ref_m`` and the reflectance per object (``World.reflectance``,
+by default from its label); values in [0, 1].
 """
 
 from __future__ import annotations
@@ -240,14 +253,77 @@ class SweepSimulator:
         hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0)
 
         ring = self.ray_ring[a + hits.ray]
-        noise = rng.standard_normal(len(ring)) * s.range_noise_std_m
-        measured = hits.distance + self.ring_bias_m[ring] + noise
+        sigma = s.range_noise_std_m
+        if s.incidence_noise_max_factor > 1:  # sigma0 / cos(incidence), clipped
+            cos = np.abs(hits.cos_incidence)
+            sigma = sigma * np.minimum(1.0 / np.maximum(cos, 1e-12), s.incidence_noise_max_factor)
+        noise = rng.standard_normal(len(ring)) * sigma
+        echo = hits.distance if s.beam_divergence_deg == 0 else self._echo_range(hits, o_bvh, d_bvh)
+        measured = echo + self.ring_bias_m[ring] + noise
         keep = (measured >= s.min_range_m) & (measured <= s.max_range_m)
         if s.dropout_probability > 0:
             keep &= rng.random(len(ring)) >= s.dropout_probability
         if not keep.all():
             hits, ring, measured = hits.select(keep), ring[keep], measured[keep]
         return CastBlock(a, hits, ring, measured, dir_local, o_bvh, d_bvh)
+
+    def _echo_range(self, hits: CompactHits, o_bvh: np.ndarray, d_bvh: np.ndarray) -> np.ndarray:
+        """(m,) range a divergent beam reports for each axis hit: an echo of its sub-rays (see the module doc).
+
+        The beam's ``beam_subrays`` sub-rays (``LidarModel.beam_pattern_rad``, oriented across and up the
+        beam with the world's z as up) leave from the beam's origin. Their hits, sorted by range, form
+        echoes wherever consecutive ranges are within ``echo_separation_m``; an echo's power is the sum of
+        its sub-rays' ``reflectance x |cos incidence|^k / range^2`` and its range their power-weighted mean.
+        ``return_mode`` picks the nearest (first), the farthest (last) or the most powerful (strongest)
+        echo. A beam none of whose sub-rays hits keeps its axis range.
+        """
+        s, rc = self.sensor, self.raycaster
+        m, S = len(hits.ray), s.beam_subrays
+        if m == 0:
+            return hits.distance
+        axis = np.take(d_bvh, hits.ray, axis=0)
+        origin = np.take(o_bvh, hits.ray, axis=0)
+        across = np.cross(axis, [0.0, 0.0, 1.0])
+        vertical = np.linalg.norm(across, axis=1) < 1e-6
+        if vertical.any():
+            across[vertical] = np.cross(axis[vertical], [1.0, 0.0, 0.0])
+        across /= np.linalg.norm(across, axis=1, keepdims=True)
+        up = np.cross(across, axis)
+        off = s.beam_pattern_rad()
+        r = np.hypot(off[:, 0], off[:, 1])
+        c, k_across, k_up = np.cos(r), np.sin(r) * off[:, 0] / np.maximum(r, 1e-300), np.sin(r) * off[:, 1] / \
+            np.maximum(r, 1e-300)
+        dirs = (axis[:, None, :] * c[None, :, None] + across[:, None, :] * k_across[None, :, None]
+                + up[:, None, :] * k_up[None, :, None]).reshape(-1, 3)
+        sub = rc.cast_compact(np.repeat(origin, S, axis=0), dirs, s.max_range_m + 1.0)
+        dist = np.full(m * S, np.inf)
+        power = np.zeros(m * S)
+        dist[sub.ray] = sub.distance
+        cosk = np.abs(sub.cos_incidence) ** s.intensity_incidence_exponent
+        power[sub.ray] = self._reflectance[self.world.face_object_id[sub.face]] * cosk / np.maximum(
+            sub.distance, 1e-6) ** 2
+        dist, power = dist.reshape(m, S), power.reshape(m, S)
+        order = np.argsort(dist, axis=1, kind="stable")
+        dist = np.take_along_axis(dist, order, axis=1)
+        power = np.take_along_axis(power, order, axis=1)
+        with np.errstate(invalid="ignore"):
+            gap = np.diff(dist, axis=1) > s.echo_separation_m  # inf - finite starts the misses' own echo
+        label = np.concatenate([np.zeros((m, 1), np.int64), np.cumsum(gap, axis=1)], axis=1)
+        flat = (np.arange(m)[:, None] * S + label).ravel()
+        e_power = np.bincount(flat, power.ravel(), minlength=m * S).reshape(m, S)
+        e_moment = np.bincount(flat, (power * np.where(np.isfinite(dist), dist, 0.0)).ravel(),
+                               minlength=m * S).reshape(m, S)
+        has = e_power > 0
+        if s.return_mode == "strongest":
+            pick = np.argmax(e_power, axis=1)
+        elif s.return_mode == "first":
+            pick = np.argmax(has, axis=1)
+        else:  # last
+            pick = S - 1 - np.argmax(has[:, ::-1], axis=1)
+        rows = np.arange(m)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rng_e = e_moment[rows, pick] / e_power[rows, pick]
+        return np.where(has[rows, pick], rng_e, hits.distance)
 
     def _fill_block(self, c: CastBlock, out: Scan, off: int, T_ref: np.ndarray) -> None:
         """Write one block's returns into rows off:off+m of the preallocated scan.
@@ -270,7 +346,10 @@ class SweepSimulator:
         np.einsum("ni,ij->nj", hits.normal, R_ref, out=out.normal[sl])
         obj = np.take(self.world.face_object_id, hits.face)
         falloff = np.minimum(1.0, (s.intensity_range_ref_m / np.maximum(measured, 1e-6)) ** 2)
-        out.intensity[sl] = np.take(self._reflectance, obj) * np.abs(hits.cos_incidence) * falloff
+        cosk = np.abs(hits.cos_incidence)
+        if s.intensity_incidence_exponent != 1:
+            cosk **= s.intensity_incidence_exponent
+        out.intensity[sl] = np.take(self._reflectance, obj) * cosk * falloff
         out.ring[sl] = c.ring
         np.take(self.ray_column, g, out=out.azimuth_index[sl])
         np.take(self.ray_time_s, g, out=out.time_s[sl])

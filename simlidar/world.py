@@ -51,6 +51,8 @@ class World:
         True for worlds built in code (the procedural scenes); ``load_world`` sets
         False: a user's mesh may be a room with outward normals, or have flipped
         or inconsistent ones.
+    reflectance: (n_objects,) diffuse reflectance per object in [0, 1], or None: from each
+        object's label (``LABEL_REFLECTANCE``). ``with_reflectance`` sets it by label or object id.
     """
 
     vertices: np.ndarray
@@ -59,6 +61,7 @@ class World:
     object_labels: list[str] = field(default_factory=list)
     source: str = ""
     normals_reliable: bool = True
+    reflectance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, dtype=np.float64)
@@ -72,12 +75,43 @@ class World:
                 n_obj - len(self.object_labels)
             )
 
+        if self.reflectance is not None:
+            self.reflectance = np.asarray(self.reflectance, dtype=np.float64)
+            if self.reflectance.shape != (len(self.object_labels),):
+                raise WorldError(f"{self.source or 'world'}: reflectance needs one value per object "
+                                 f"({len(self.object_labels)}), got shape {self.reflectance.shape}")
+            if not np.all((self.reflectance >= 0) & (self.reflectance <= 1)):
+                raise WorldError(f"{self.source or 'world'}: reflectance must lie in [0, 1]")
+
     @property
     def object_reflectance(self) -> np.ndarray:
-        """(n_objects,) float reflectance from each object's label."""
+        """(n_objects,) float reflectance of each object: set (``reflectance``), else from its label."""
+        if self.reflectance is not None:
+            return self.reflectance
         return np.array(
             [LABEL_REFLECTANCE.get(lbl, DEFAULT_REFLECTANCE) for lbl in self.object_labels]
         )
+
+    def with_reflectance(self, values: dict) -> World:
+        """A copy with the reflectance of some objects set: keys are labels (every object of that label)
+        or object ids (int, or digits), values in [0, 1]. Raises WorldError naming an unknown key."""
+        import dataclasses
+
+        refl = self.object_reflectance.copy()
+        labels = np.asarray(self.object_labels, dtype=object)
+        for key, value in values.items():
+            text = str(key)
+            if text.isdigit():
+                if int(text) >= len(refl):
+                    raise WorldError(f"{self.source or 'world'}: reflectance for object {text}, but the world has "
+                                     f"{len(refl)} objects (0..{len(refl) - 1})")
+                refl[int(text)] = float(value)
+            elif text in set(self.object_labels):
+                refl[labels == text] = float(value)
+            else:
+                raise WorldError(f"{self.source or 'world'}: reflectance for '{text}', which is neither an object "
+                                 f"id nor a label of the world ({', '.join(sorted(set(self.object_labels)))})")
+        return dataclasses.replace(self, reflectance=refl)
 
     def to_trimesh(self):
         import trimesh

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -48,6 +49,9 @@ def add_commands(sub) -> None:
         help="refuse a pose whose probe rays mostly hit back faces, as for a procedural scene (by default a "
         "--mesh only warns: rooms with outward normals and meshes with inconsistent normals look like that)",
     )
+    p.add_argument("--reflectance", action="append", default=[], metavar="KEY=VALUE",
+                   help="reflectance in [0, 1] of the objects of a label (road=0.1) or of one object id (12=0.9), "
+                   "for the intensity (repeatable; default: by label)")
     p.add_argument("--sensor", default="salo32", help=f"preset ({', '.join(preset_names())}) or YAML file")
     p.add_argument("--frames", type=whole_number(1),
                    help="number of sweeps (default: as many as the poses cover, one per pose without --times; "
@@ -72,6 +76,28 @@ def _sensor_from_args(args):
     if getattr(args, "noise_std", None) is not None:
         sensor = sensor.with_overrides(range_noise_std_m=args.noise_std)
     return sensor
+
+
+def _reflectance(args) -> dict:
+    """``--reflectance KEY=VALUE`` arguments as {key: value}; a one-line error for a malformed one."""
+    out = {}
+    for text in args.reflectance:
+        key, sep, value = text.partition("=")
+        try:
+            out[key.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not key.strip():
+            raise CommandError(f"--reflectance {text!r}: expected LABEL=VALUE or OBJECT_ID=VALUE, e.g. road=0.1")
+    return out
+
+
+def _with_reflectance(world, args, info: dict):
+    values = _reflectance(args)
+    if not values:
+        return world
+    info["reflectance"] = values
+    return world.with_reflectance(values)
 
 
 def cmd_simulate(args) -> int:
@@ -99,6 +125,7 @@ def _simulate_mesh(args, sensor) -> int:
     fit = built.sweeps_covered(sensor)
     frames = args.frames if args.frames is not None else fit
     info = {"command": "simulate", **built.info}
+    world = _with_reflectance(built.world, args, info)
     beyond = built.beyond_last_pose_s(sensor, frames)
     if beyond > 0:
         times = built.times
@@ -114,7 +141,7 @@ def _simulate_mesh(args, sensor) -> int:
                                 "beyond_last_pose_s": round(float(beyond), 9),
                                 "method": "constant velocity of the last pose interval"}
     with _simulating(frames, str(args.poses)) as on_frame:
-        simulate_sequence(built.world, built.trajectory, sensor, args.out, frames=frames,
+        simulate_sequence(world, built.trajectory, sensor, args.out, frames=frames,
                           seed=0 if args.seed is None else args.seed, t_start=float(built.times[0]),
                           motion_distortion=args.motion_distortion,
                           info={**info, "noise_std_m": sensor.range_noise_std_m}, force=args.force,
@@ -133,6 +160,8 @@ def _simulate_scene(args, sensor) -> int:
         if args.speed is not None:
             overrides["speed_m_s"] = args.speed
         scene = build_scene_world(args.scene, seed, overrides)
+        info = {"command": "simulate"}
+        scene = dataclasses.replace(scene, world=_with_reflectance(scene.world, args, info))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     start = 0.0 if args.start is None else args.start
@@ -145,7 +174,7 @@ def _simulate_scene(args, sensor) -> int:
         )
     with _simulating(frames, f"scene {args.scene}") as on_frame:
         simulate_scene(scene, sensor, args.out, frames, seed=seed, start_s=start,
-                       motion_distortion=args.motion_distortion, info={"command": "simulate"}, force=args.force,
+                       motion_distortion=args.motion_distortion, info=info, force=args.force,
                        on_frame=on_frame)
     print(f"wrote {frames} frames to {args.out}")
     return 0
