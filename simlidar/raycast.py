@@ -47,18 +47,25 @@ class CompactHits:
     face: (m,) int64 hit triangle.
     distance: (m,) float64 metres along the ray.
     cos_incidence: (m,) float64 signed d . n_face (positive: the back side was hit).
-    normal: (m, 3) float64 unit normal of the hit triangle, turned towards the ray origin.
+    face_normals: (F, 3) the mesh's unit face normals (the raycaster's table, shared, not copied).
+    ``normal`` (m, 3): the hit triangle's unit normal turned towards the ray origin, made when asked.
     """
 
     ray: np.ndarray
     face: np.ndarray
     distance: np.ndarray
     cos_incidence: np.ndarray
-    normal: np.ndarray
+    face_normals: np.ndarray
+
+    @property
+    def normal(self) -> np.ndarray:
+        n = np.take(self.face_normals, self.face, axis=0)
+        n *= -np.sign(self.cos_incidence)[:, None]  # face the ray origin
+        return n
 
     def select(self, mask: np.ndarray) -> CompactHits:
-        return CompactHits(self.ray[mask], self.face[mask], self.distance[mask],
-                           self.cos_incidence[mask], self.normal[mask])
+        return CompactHits(self.ray[mask], self.face[mask], self.distance[mask], self.cos_incidence[mask],
+                           self.face_normals)
 
 
 class Raycaster:
@@ -138,8 +145,7 @@ class Raycaster:
         if grazing.any():  # a ray in the triangle's plane: Embree's own distance (asked again for these rays)
             g = ray[grazing]
             t[grazing] = self._scene.run(o32[g], d32[g], dists=limit32[g], output=1)["tfar"]
-        n_f *= -np.sign(denom)[:, None]  # face the ray origin
-        hits = CompactHits(ray, face, t, denom, n_f)
+        hits = CompactHits(ray, face, t, denom, self._face_normal)
         return hits if t.max(initial=0.0) <= max_distance else hits.select(t <= max_distance)
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, max_distance: float) -> RayHits:
