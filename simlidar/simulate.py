@@ -37,6 +37,7 @@ def simulate_sequence(
     on_frame: Callable[[int, Scan], None] | None = None,
     simulator: SweepSimulator | None = None,
     strict_inside: bool | None = None,
+    compress_truth: bool = False,
 ) -> Path:
     """Simulate ``frames`` consecutive sweeps and write them as a sequence folder.
 
@@ -48,15 +49,16 @@ def simulate_sequence(
     ``inside_check`` records it. ``info`` goes into the manifest (scene, mesh,
     parameters). ``on_frame(k, scan)`` is called after each frame is simulated
     and queued for writing (progress bars); a background thread writes it while
-    the next is simulated. Returns the finished folder.
+    the next is simulated. compress_truth: zlib the truth files (``simlidar.formats.truth``).
+    Returns the finished folder.
     """
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
     sim = simulator or SweepSimulator(world, sensor, seed=seed, motion_distortion=motion_distortion)
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
-    writer = SequenceWriter(out_dir, sensor, {}, force=force, n_objects=len(world.object_labels))  # refuses an
-    # existing folder now
+    writer = SequenceWriter(out_dir, sensor, {}, force=force, n_objects=len(world.object_labels),
+                            compress_truth=compress_truth)  # refuses an existing folder now
     strict = world.normals_reliable if strict_inside is None else bool(strict_inside)
     inside_record = check_poses(sim.raycaster, poses, strict, source=world.source)
     manifest_info = {

@@ -87,11 +87,29 @@ def test_compact_truth_round_trip_within_its_bounds(tmp_path, preset, jitter):
 def test_compact_truth_without_motion_distortion_has_no_knots(tmp_path):
     seq, scans = _simulate(tmp_path, load_sensor("vlp16"), motion=False, frames=1)
     data = (seq.path / "sidecar" / "000000.truth").read_bytes()
-    n, knots, width = truth.read_header(data, "x")
+    n, knots, width, _ = truth.read_header(data, "x")
     assert (n, knots, width) == (len(scans[0]), 0, 1)  # 30 objects: one byte each
     assert len(data) == truth.HEADER_BYTES + 13 * n
     err = np.linalg.norm(seq[0].fields["true_xyz"] - scans[0].true_xyz, axis=1)
     assert np.all(err <= truth.TRUE_XYZ_REL_BOUND * scans[0].true_range_m + truth.TRUE_XYZ_ABS_BOUND_M)
+
+
+def test_compressed_truth_reads_the_same(tmp_path):
+    world = _street_world()
+    sensor = load_sensor("vlp16")
+    traj = constant_velocity(v=(8.0, 0.0, 0.0), yaw_rate=0.3, start=(-20.0, 0.0, 1.9))
+    for compress in (False, True):
+        simulate_sequence(world, traj, sensor, tmp_path / str(compress), frames=2, seed=2, compress_truth=compress)
+    plain, packed = open_sequence(tmp_path / "False"), open_sequence(tmp_path / "True")
+    for a, b in zip(plain, packed, strict=True):
+        assert np.array_equal(a.fields, b.fields)
+    size = {c: (tmp_path / str(c) / "sidecar" / "000001.truth").stat().st_size for c in (False, True)}
+    assert size[True] < 0.6 * size[False]
+    car = tmp_path / "True" / "sidecar" / "000001.truth"
+    data = car.read_bytes()
+    car.write_bytes(data[:-10])
+    with pytest.raises(DatasetError, match=r"000001\.truth: damaged compressed truth"):
+        packed[1]
 
 
 def test_octahedral_normals_within_a_hundredth_of_a_degree():

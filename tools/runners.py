@@ -47,7 +47,7 @@ class SimulatedSequence:
 
 def simulate_scene(scene, sensor, out: str | Path, frames: int, *, seed: int, start_s: float = 0.0,
                    motion_distortion: bool = True, info: dict | None = None, force: bool = False,
-                   on_frame=None, threads: int | None = None) -> SimulatedSequence:
+                   on_frame=None, threads: int | None = None, compress_truth: bool = False) -> SimulatedSequence:
     """Simulate ``frames`` sweeps of ``sensor`` along a built scene into the sequence folder ``out``.
 
     scene: ``tools.worlds.SceneWorld``. seed: the simulator's noise seed.
@@ -55,7 +55,8 @@ def simulate_scene(scene, sensor, out: str | Path, frames: int, *, seed: int, st
     manifest entries (the command, a cache key); the scene's own (``scene.info``)
     and ``noise_std_m`` are added. force: replace an existing ``out``.
     on_frame(k, scan) after each sweep. threads: Embree threads (None: all
-    cores; the result never depends on it). Raises PathTooShort before anything
+    cores; the result never depends on it). compress_truth: zlib the truth files. Raises PathTooShort
+    before anything
     is written when the path has room for fewer sweeps.
     """
     from simlidar.simulate import simulate_sequence
@@ -68,7 +69,7 @@ def simulate_scene(scene, sensor, out: str | Path, frames: int, *, seed: int, st
     simulator = SweepSimulator(scene.world, sensor, seed=seed, motion_distortion=motion_distortion, threads=threads)
     path = simulate_sequence(scene.world, scene.trajectory, sensor, out, frames=frames, seed=seed, t_start=start_s,
                              motion_distortion=motion_distortion, simulator=simulator, force=force,
-                             on_frame=on_frame,
+                             on_frame=on_frame, compress_truth=compress_truth,
                              info={**scene.info, **(info or {}), "noise_std_m": sensor.range_noise_std_m})
     return SimulatedSequence(Path(path), frames, time.perf_counter() - t0)
 

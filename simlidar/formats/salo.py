@@ -77,10 +77,12 @@ class SequenceWriter:
     n_objects: the world's object count, which sets the width of the object ids
     (1, 2 or 4 bytes; None: 4). format_version: 2 (compact truth, the default) or
     1 (the old ``.npy`` sidecar, kept to test the reader of old sequences).
+    compress_truth: zlib the truth files (a third of the size, 45 ms more a salo32 frame).
     """
 
     def __init__(self, out_dir: str | Path, sensor: LidarModel, info: dict, force: bool = False,
-                 n_objects: int | None = None, format_version: int = FORMAT_VERSION, queue_frames: int = 2):
+                 n_objects: int | None = None, format_version: int = FORMAT_VERSION, queue_frames: int = 2,
+                 compress_truth: bool = False):
         if format_version not in FORMAT_VERSIONS:
             raise ValueError(f"format_version must be one of {FORMAT_VERSIONS}, got {format_version}")
         self.out_dir = Path(out_dir)
@@ -89,6 +91,7 @@ class SequenceWriter:
         self.sensor = sensor
         self.info = info
         self.format_version = format_version
+        self.compress_truth = bool(compress_truth)
         self.id_bytes = 4 if n_objects is None else truth.object_id_bytes(n_objects)
         self._poses: list[np.ndarray] = []
         self._times: list[float] = []
@@ -168,7 +171,8 @@ class SequenceWriter:
         else:
             knots = None if scan.motion is None else truth.motion_knots(scan.motion)
             ray = np.asarray(scan.azimuth_index, dtype=np.int64) * self.sensor.rings + scan.ring
-            car = truth.encode(ray, scan.true_range_m, scan.normal, scan.object_id, knots, self.id_bytes)
+            car = truth.encode(ray, scan.true_range_m, scan.normal, scan.object_id, knots, self.id_bytes,
+                               compress=self.compress_truth)
         for rel, data in ((f"velodyne/{name}.bin", memoryview(points).cast("B")),
                           (f"sidecar/{name}{SIDECAR_SUFFIX[self.format_version]}", car)):
             with open(self.tmp / rel, "wb", buffering=0) as fh:
