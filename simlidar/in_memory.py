@@ -11,7 +11,11 @@ writing and reading gigabytes of truth nobody keeps.
 What a frame carries is chosen with ``fields``:
 
 - ``"simulated"``: ring and per-point time, as a simulated sequence folder's
-  sidecar would give them;
+  sidecar gives them (the same float64 times: an odometry run gives the same
+  poses on the frames in memory as on the folder);
+- ``"truth"``: the whole per-point record a folder's reader gives
+  (``simlidar.formats.truth.SIDECAR_DTYPE``: true range, point, normal, object),
+  for studies that judge against the truth (50 bytes a return: short sequences);
 - ``"real"``: nothing beyond x, y, z, as real KITTI scans (rings must then
   come from the elevation, and there are no per-point times to de-skew with).
 
@@ -37,8 +41,8 @@ from .sweep import SweepSimulator
 from .trajectory import Trajectory
 from .world import World
 
-FIELD_SETS = ("simulated", "real")
-_SIMULATED_DTYPE = np.dtype([("ring", "<u2"), ("time_s", "<f4")])
+FIELD_SETS = ("simulated", "truth", "real")
+_SIMULATED_DTYPE = np.dtype([("ring", "<u2"), ("time_s", "<f8")])
 
 
 @dataclass
@@ -84,19 +88,27 @@ def simulate_in_memory(
     fields: str = "simulated",
     name: str = "memory",
     on_frame: Callable[[int], None] | None = None,
+    motion_distortion: bool | None = None,
+    simulator: SweepSimulator | None = None,
+    info: dict | None = None,
 ) -> InMemorySequence:
     """Simulate ``frames`` sweeps into an ``InMemorySequence``.
 
     ``fields="simulated"``: motion distortion on, ring and time kept (a simulated
-    sequence). ``fields="real"``: motion distortion off and no per-point fields,
-    as real, motion-compensated scans. The noise seed and the poses are those of
-    ``simulate_sequence`` with the same arguments.
+    sequence); ``"truth"``: the whole per-point record. ``fields="real"``: motion
+    distortion off and no per-point fields, as real, motion-compensated scans.
+    motion_distortion: overrides what ``fields`` implies. The noise seed and the
+    poses are those of ``simulate_sequence`` with the same arguments. simulator:
+    a ``SweepSimulator`` to reuse (its seed and motion distortion then rule).
+    info: more manifest entries (a sweep's key, a suite spec).
     """
     if fields not in FIELD_SETS:
         raise ValueError(f"fields must be one of {', '.join(FIELD_SETS)}, got {fields!r}")
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
-    sim = SweepSimulator(world, sensor, seed=seed, motion_distortion=fields == "simulated")
+    if motion_distortion is None:
+        motion_distortion = fields != "real"
+    sim = simulator or SweepSimulator(world, sensor, seed=seed, motion_distortion=motion_distortion)
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
     check_poses(sim.raycaster, poses, strict=world.normals_reliable, source=world.source)
@@ -108,6 +120,8 @@ def simulate_in_memory(
             rec = np.empty(len(scan.xyz), dtype=_SIMULATED_DTYPE)
             rec["ring"], rec["time_s"] = scan.ring, scan.time_s
             extra.append(rec)
+        elif fields == "truth":
+            extra.append(scan.sidecar())
         else:
             extra.append(None)
         degen.append(degeneracy(scan.true_xyz, scan.normal))
@@ -116,4 +130,6 @@ def simulate_in_memory(
     rel = se3.inverse(poses[0]) @ poses
     rel[0] = np.eye(4)
     return InMemorySequence(Path(name), sensor, points, extra, rel, t0 - t0[0], degen,
-                            {"seed": int(seed), "fields": fields, "frames": int(frames), "t_start_s": float(t_start)})
+                            {"seed": int(sim.seed), "fields": fields, "frames": int(frames),
+                             "t_start_s": float(t_start), "motion_distortion": bool(sim.motion_distortion),
+                             **(info or {})})

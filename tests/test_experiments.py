@@ -64,6 +64,43 @@ def test_parse_spec_and_cache_key(cache):
         ensure_sequence(SequenceSpec("city", 1, frames=100000), cache)
 
 
+def test_the_cache_keeps_to_its_cap_evicting_the_least_recently_used(tmp_path, caplog):
+    import os
+
+    from tools.experiments.suite import trim_cache
+
+    for k, name in enumerate(["a", "b", "c", "d"]):  # 1 MB each, used in this order (a the longest ago)
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "manifest.json").write_text("{}")
+        (folder / "velodyne.bin").write_bytes(bytes(10**6 - 2))
+        os.utime(folder, (1000.0 + k, 1000.0 + k))
+    (tmp_path / ".x.partial-1").mkdir()  # not a sequence: never counted nor removed
+    os.utime(tmp_path / "a", (2000.0, 2000.0))  # a used again: now b is the least recent
+    caplog.set_level("WARNING")
+    removed = trim_cache(tmp_path, int(2.5e6), keep=tmp_path / "b")
+    assert [p.name for p in removed] == ["c", "d"]  # b, older still, is the one in use
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".x.partial-1", "a", "b"]
+    assert "over its 0.0025 GB cap: removed c (0.001 GB, last used" in caplog.text
+    assert trim_cache(tmp_path, int(2e6)) == []  # within the cap: nothing goes
+
+
+def test_experiments_simulate_into_memory_without_a_cache(tmp_path):
+    from tools.experiments.suite import load_sequence
+
+    spec = SequenceSpec("tunnel", 1, frames=2, start_s=10.0, sensor="vlp16")
+    mem = load_sequence(spec, None, fields="truth")
+    disk = load_sequence(spec, tmp_path)
+    assert mem.kind == "memory" and len(mem) == 2 and list(tmp_path.iterdir()) == [disk.path]
+    for a, b in zip(mem, disk, strict=True):
+        assert np.array_equal(a.points, b.points)
+        for name in ("ring", "azimuth_index", "time_s", "object_id"):
+            assert np.array_equal(a.fields[name], b.fields[name]), name
+        assert np.abs(a.fields["true_xyz"] - b.fields["true_xyz"]).max() < 1e-4
+    with pytest.raises(ValueError, match="room for"):
+        load_sequence(SequenceSpec("tunnel", 1, frames=100000), None)
+
+
 def test_noise_transform_follows_the_paper():
     from tools.experiments.rejector_study import noise_transform
 

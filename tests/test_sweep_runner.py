@@ -36,7 +36,7 @@ from tools.sweep import (
 from tools.sweep.store import VOLATILE_COLUMNS
 
 TINY = {"name": "tiny", "scenes": ["city"], "sensors": ["vlp16"], "noise_std_m": [0.01, 0.04],
-        "variants": ["bl", "salo"], "frames": 4}
+        "variants": ["bl", "salo"], "frames": 4, "sequences": "disk"}
 
 
 def _stable(rows: list[dict]) -> list[dict]:
@@ -201,6 +201,26 @@ def test_a_failed_run_is_recorded_and_the_others_complete(tmp_path):
     # Failed runs are redone by the next sweep (unless told not to).
     assert len(plan_sweep(too_long, Store(tmp_path / "t")).todo) == 2
     assert len(plan_sweep(too_long, Store(tmp_path / "t"), retry_failed=False).todo) == 0
+
+
+@pytest.mark.slow
+def test_a_sweep_in_memory_gives_the_rows_of_one_on_disk_and_writes_no_sequence(tiny_sweep, tmp_path):
+    _, disk = tiny_sweep
+    memory = run_sweep(spec_from_dict({**TINY, "sequences": "memory"}), tmp_path / "m", InlineExecutor(),
+                       report=False)
+    assert not memory.failures and not (tmp_path / "m" / "sequences").exists()
+    assert [r["key"] for r in memory.rows] == [r["key"] for r in disk.rows]
+    for a, b in zip(memory.rows, disk.rows, strict=True):
+        # the same scans, rings and point times reach the odometry (the folder's text files round the sweep
+        # start times and true poses at 1e-14): the same poses to rounding, so the same figures
+        assert np.allclose(read_kitti_poses(tmp_path / "m" / "runs" / a["key"] / "poses.txt"),
+                           read_kitti_poses(tiny_sweep[0] / "runs" / b["key"] / "poses.txt"), rtol=0, atol=1e-12)
+        for metric in ("ate_rmse_m", "ate_aligned_rmse_m", "rpe_t_rmse_m", "rpe_r_rmse_deg"):
+            assert a[metric] == pytest.approx(b[metric], rel=1e-6, abs=1e-12), metric
+    # a path too short fails the runs as a failed simulation, as on disk
+    rows = run_sweep(spec_from_dict({**TINY, "sequences": "memory", "noise_std_m": [0.01], "start_s": 95.0}),
+                     tmp_path / "t", InlineExecutor(), report=False).rows
+    assert all(r["status"] == "failed" and "simulation" in r["error"] and "room for" in r["error"] for r in rows)
 
 
 @pytest.mark.slow

@@ -4,6 +4,8 @@
                                               # end to end: salo simulate --scene city --seed 3 --frames 100
     python -m tools.bench_sim --e2e-frames 0  # skip the end-to-end run
     python -m tools.bench_sim --memory 1000   # also a 1000-frame sequence: peak RSS stays flat
+    python -m tools.bench_sim --big-world 2000000 --e2e-frames 0   # a tiled city of >= 2M triangles:
+                                              # load time, sweeps/s, memory over a 300-frame sequence
 
 The end-to-end run calls ``tools.runners.simulate_scene``, the function behind
 ``salo simulate --scene``, writing the sequence (scans and truth) to a temporary
@@ -173,6 +175,76 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
           f"{sum(per_return.values()):.1f} B")
 
 
+def _rss_mb() -> float:
+    """The process's resident memory now, MB (Linux /proc; the peak is ``peak_rss_mb``)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def tiled_city(min_triangles: int, seed: int = 1):
+    """Whole ``city`` scenes (seeds seed, seed + 1, ...) side by side on a 520 m x 340 m grid until the
+    world has ``min_triangles``; returns (World, the first tile's trajectory)."""
+    import scenes
+
+    parts, tris, k, traj = [], 0, 0, None
+    while tris < min_triangles:
+        scene = scenes.build_scene("city", seed=seed + k)
+        traj = traj or scene.trajectory
+        shift = np.array([520.0 * (k % 4), 340.0 * (k // 4), 0.0])
+        parts.append((scene.vertices + shift, scene.faces, scene.face_object_id, scene.object_labels))
+        tris += len(scene.faces)
+        k += 1
+    verts, faces, ids, labels, vbase, obase = [], [], [], [], 0, 0
+    for v, f, o, lab in parts:
+        verts.append(v)
+        faces.append(f + vbase)
+        ids.append(o + obase)
+        labels += list(lab)
+        vbase += len(v)
+        obase += len(lab)
+    return World(np.vstack(verts), np.vstack(faces), np.concatenate(ids), labels, f"{k} city tiles"), traj
+
+
+def bench_big_world(min_triangles: int, sensor_name: str, frames: int, tmp_root: str | None) -> None:
+    """Load a >= ``min_triangles`` world from a PLY file as ``salo simulate --mesh`` does, and simulate along it."""
+    from simlidar.world import load_world, save_world_ply
+
+    sensor = load_sensor(sensor_name)
+    t = time.perf_counter()
+    world, traj = tiled_city(min_triangles)
+    print(f"big world: {len(world.faces):,} triangles, {len(world.object_labels):,} objects "
+          f"(built from scenes in {time.perf_counter() - t:.1f} s)")
+    with tempfile.TemporaryDirectory(dir=tmp_root) as tmp:
+        ply = Path(tmp) / "world.ply"
+        save_world_ply(world, ply)
+        del world
+        rss0 = _rss_mb()
+        t = time.perf_counter()
+        loaded = load_world(ply)
+        t_load = time.perf_counter() - t
+        t = time.perf_counter()
+        sim = SweepSimulator(loaded, sensor, seed=0)
+        t_bvh = time.perf_counter() - t
+        rss_mesh = _rss_mb()
+        print(f"  PLY {ply.stat().st_size / 1e6:.0f} MB: load {t_load:.1f} s, BVH and tables {t_bvh:.1f} s; "
+              f"resident memory {rss0:.0f} MB before, {rss_mesh:.0f} MB with the world loaded")
+        rss = {}
+
+        def on_frame(k, scan):
+            if k + 1 in (frames // 10, frames // 2, frames):
+                rss[k + 1] = _rss_mb()
+
+        t = time.perf_counter()
+        simulate_sequence(loaded, traj, sensor, Path(tmp) / "seq", frames=frames, simulator=sim, on_frame=on_frame,
+                          t_start=5.0)
+        dt = time.perf_counter() - t
+    print(f"  {frames} frames of {sensor.name} written: {frames / dt:.1f} sweeps/s (whole call, inside check "
+          f"included); resident memory after " + ", ".join(f"{k} frames {v:.0f} MB" for k, v in rss.items())
+          + f"; peak {peak_rss_mb():.0f} MB")
+
+
 def bench_memory(world: World, sensor_name: str, frames: int) -> None:
     sensor = load_sensor(sensor_name)
     rss = {}
@@ -202,6 +274,8 @@ def main() -> None:
     ap.add_argument("--e2e-frames", type=int, default=100, help="frames of the end-to-end run (0: skip)")
     ap.add_argument("--e2e-scene", default="city")
     ap.add_argument("--e2e-seed", type=int, default=3)
+    ap.add_argument("--big-world", type=int, default=0, help="triangles of the tiled-city world run (0: skip)")
+    ap.add_argument("--big-frames", type=int, default=300, help="frames of the big-world run")
     ap.add_argument("--tmp", help="folder for the end-to-end sequence (default: the system's temporary folder)")
     args = ap.parse_args()
     t = time.perf_counter()
@@ -210,6 +284,8 @@ def main() -> None:
     bench_sweep(world, args.sensor, args.repeats)
     if args.e2e_frames:
         bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp)
+    if args.big_world:
+        bench_big_world(args.big_world, args.sensor, args.big_frames, args.tmp)
     if args.memory:
         bench_memory(world, args.memory_sensor, args.memory)
 

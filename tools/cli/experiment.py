@@ -25,7 +25,8 @@ def add_commands(subparsers) -> None:
         help="the SALO paper's experiments on simulated data (table, rejectors, ncf)",
         description="Run one of the paper's experiments on simulated sequences. Each writes a run folder "
         "(run.json with the command, parameters, seeds and version; results.json; CSV and Markdown tables; "
-        "PNG figures; summary.md). Sequences are simulated once and cached by their parameters (--cache).",
+        "PNG figures; summary.md). Sequences are simulated in memory, or with --on-disk once into a capped cache "
+        "(--cache, --cache-limit-gb) and reused when their parameters match.",
     )
     sub = p.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
     _add_table(sub)
@@ -47,13 +48,28 @@ def add_commands(subparsers) -> None:
 
 def _common(p, name: str) -> None:
     p.add_argument("--out", type=Path, default=DEFAULT_ROOT / name, help=f"run folder (default {DEFAULT_ROOT / name})")
+    p.add_argument("--on-disk", action="store_true",
+                   help="simulate the sequences into the cache folder and read them from there, reused when their "
+                   "parameters match (default: in memory, nothing but the results written)")
     p.add_argument("--cache", type=Path, default=DEFAULT_CACHE,
-                   help=f"simulated sequences, reused when their parameters match (default {DEFAULT_CACHE})")
+                   help=f"with --on-disk: the cache folder (default {DEFAULT_CACHE})")
+    p.add_argument("--cache-limit-gb", type=real_number(0.0, above=True), default=20.0,
+                   help="with --on-disk: the cache's size cap; the least recently used sequences are removed, "
+                   "each with a warning (default 20)")
     p.add_argument("--quick", action="store_true", help="a small, fast run (minutes -> seconds): for trying it out")
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an odometry parameter for every method (repeatable), a dotted key: e.g. "
                    "match.target=raw (salo odometry --keys lists them)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
+
+
+def _cache(args) -> Path | None:
+    """The cache folder with --on-disk, else None: sequences in memory."""
+    return args.cache if args.on_disk else None
+
+
+def _cache_limit(args) -> int:
+    return int(args.cache_limit_gb * 1e9)
 
 
 def _sequence_args(p, default_text: str, quick_frames: int) -> None:
@@ -219,7 +235,8 @@ def cmd_table(args) -> int:
         raise CommandError(str(exc)) from None
     record = RunRecord(args.out, "table", params.to_dict(), command_line()).start()
     try:
-        result = run_table(params, args.cache, record=record, progress=args.progress)
+        result = run_table(params, _cache(args), record=record, progress=args.progress,
+                           cache_limit_bytes=_cache_limit(args))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_table(result, record)
@@ -272,7 +289,8 @@ def cmd_rejectors(args) -> int:
                                  map_frames=args.map_frames)
     record = RunRecord(args.out, "rejectors", params.to_dict(), command_line()).start()
     try:
-        result = run_rejector_study(params, args.cache, progress=args.progress)
+        result = run_rejector_study(params, _cache(args), progress=args.progress,
+                                    cache_limit_bytes=_cache_limit(args))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_rejector_study(result, record)
@@ -313,7 +331,8 @@ def cmd_ncf(args) -> int:
                             config_overrides=_config_overrides(args.config_set))
     record = RunRecord(args.out, "ncf", params.to_dict(), command_line()).start()
     try:
-        result = run_ncf_study(params, args.cache, progress=args.progress)
+        result = run_ncf_study(params, _cache(args), progress=args.progress,
+                               cache_limit_bytes=_cache_limit(args))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_ncf_study(result, record)

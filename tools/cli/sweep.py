@@ -45,8 +45,9 @@ class _SpecKeysFormatter(argparse.RawDescriptionHelpFormatter):
 def add_commands(subparsers) -> None:
     """Register ``sweep`` and ``regress`` on the main parser's sub-parsers."""
     description = textwrap.fill(
-        "Run every combination of a sweep spec's axes: simulate each sequence once (or reuse it "
-        "from the output folder), run each odometry variant on it, evaluate against ground truth. Results: "
+        "Run every combination of a sweep spec's axes: simulate each sequence (in memory by default; with "
+        "the spec's sequences: disk, once into the output folder, reused next time), run each odometry variant "
+        "on it, evaluate against ground truth. Results: "
         "OUT/results.csv (one row per run: parameters, metrics, timings, versions, error), OUT/runs/KEY/ "
         "(each run's poses, diagnostics and result.json), OUT/summary.md|csv and OUT/plots/SCENE.png "
         "(error against noise per variant). Re-running resumes: finished runs are skipped, half-written "
@@ -87,8 +88,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--suite", type=Path, metavar="SPEC.yaml", help="a sweep spec to use as the suite instead")
     p.add_argument("--out", type=Path, default=Path("out/regress"), help="output folder (default out/regress)")
     p.add_argument("--keep-sequences", action="store_true",
-                   help="keep the simulated sequences in --out and reuse them next time (faster; stale if "
-                        "the simulator changes)")
+                   help="write the simulated sequences into --out and reuse them next time (faster; stale if "
+                        "the simulator changes); by default they are simulated in memory")
     p.add_argument("--timeout", type=real_number(0.0, above=True), default=3600.0, metavar="S",
                    help="time limit of --odometry-command per sequence, s (default 3600)")
     _add_executor_args(p)
@@ -190,7 +191,7 @@ def cmd_regress(args) -> int:
         suite = load_spec(args.suite) if args.suite else None
         spec = suite_spec(args.odometry_command, suite, variant_name=args.name)
         if args.keep_sequences:
-            spec = replace(spec, keep_sequences=True)
+            spec = replace(spec, keep_sequences=True, sequences="disk")
         baseline = None
         if not args.update:
             baseline = read_baseline(baseline_path)  # fail before the work: missing, or for another suite

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import SequenceSpec, ensure_sequence
+from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence
 
 log = logging.getLogger(__name__)
 
@@ -250,11 +250,13 @@ class NcfStudyResult:
     overview: list[dict]
 
 
-def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path, progress: bool = False) -> NcfStudyResult:
-    """Simulate the scans at each noise level and measure (see the module notes); writes nothing."""
-    from tqdm import tqdm
+def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path | None, progress: bool = False,
+                  cache_limit_bytes: int | None = DEFAULT_CACHE_LIMIT_BYTES) -> NcfStudyResult:
+    """Simulate the scans at each noise level and measure (see the module notes); writes nothing.
 
-    from simlidar.dataset import open_sequence
+    cache_dir: the sequence cache, or None: every scan simulated in memory (with its truth).
+    """
+    from tqdm import tqdm
 
     config = params.config()
     calib, ctau, overview = [], [], []
@@ -262,7 +264,8 @@ def run_ncf_study(params: NcfStudyParams, cache_dir: str | Path, progress: bool 
     per_level: dict[float, list[NormalSamples]] = {}
     for j, (noise, spec) in enumerate(tqdm(jobs, desc="ncf study", unit="scan", disable=not progress,
                                            dynamic_ncols=True)):
-        seq = open_sequence(ensure_sequence(spec.with_changes(noise_std_m=noise), cache_dir, progress=False))
+        seq = load_sequence(spec.with_changes(noise_std_m=noise), cache_dir, fields="truth",
+                            cache_limit_bytes=cache_limit_bytes)
         rng = np.random.default_rng([params.seed, j])
         per_level.setdefault(noise, []).append(
             scan_samples(seq, 0, config, params.models, rng, params.max_points_per_scan))

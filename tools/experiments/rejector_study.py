@@ -93,7 +93,7 @@ from simlidar import se3
 from .levels import bounded_recall, level_label
 from .map_target import MapFrame, build_map_target
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import SequenceSpec, ensure_sequence, table_suite
+from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 from .truth import PointTruth, TruthCriteria, true_matches, truth_of_points, truth_of_rows
 
 log = logging.getLogger(__name__)
@@ -422,14 +422,13 @@ def draw_pairs(lengths: list[int], n: int, rng: np.random.Generator) -> list[tup
     return sorted(all_pairs[i] for i in pick)
 
 
-def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progress: bool = False
-                       ) -> RejectorStudyResult:
+def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path | None, progress: bool = False,
+                       cache_limit_bytes: int | None = DEFAULT_CACHE_LIMIT_BYTES) -> RejectorStudyResult:
     """Run the study (see the module notes); nothing is written (``write_rejector_study`` does)."""
     from tqdm import tqdm
 
     from odometry.config import variant
     from odometry.icp import register
-    from simlidar.dataset import open_sequence
 
     unknown = sorted(set(params.targets) - set(TARGETS))
     if unknown:
@@ -442,7 +441,9 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path, progr
     # the GCR thresholds come from the map's normals at the first matches.
     on_map = {**overrides, "match": {**overrides.get("match", {}), "target": "map"}}
     map_configs = {"distance": variant("ncf-map").replace(**on_map), "gcr": variant("salo-map").replace(**on_map)}
-    sequences = [open_sequence(ensure_sequence(s, cache_dir, progress)) for s in params.sequences]
+    # cache_dir None: simulated in memory, with the per-point truth the study judges against
+    sequences = [load_sequence(s, cache_dir, progress, fields="truth", cache_limit_bytes=cache_limit_bytes)
+                 for s in params.sequences]
     rng = np.random.default_rng([params.seed, 0x5EED])
     chosen = draw_pairs([len(s) for s in sequences], params.pairs, rng)
     regs, rej, pair_rows = [], [], []

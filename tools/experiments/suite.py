@@ -11,8 +11,17 @@ mesh's sha256 and the package version, so a change to any of them (a scene
 generator edited, a preset changed) simulates afresh instead of reusing a
 stale copy. The sequence's manifest records the spec and the key.
 
-A salo32 frame takes about 9 MB on disk (points plus the ground-truth
-sidecar): a 300-frame sequence is about 2.7 GB.
+``load_sequence`` is what the experiments call: with no cache folder it
+simulates the spec straight into memory (``simlidar.in_memory``; nothing is
+written, a 300-frame salo32 sequence takes about 800 MB while it is used),
+with one it goes through ``ensure_sequence`` and reads the folder back.
+
+The cache is capped: after each use, the least recently used sequences
+(a folder's modification time is touched on every use) are removed until the
+cache holds at most ``cache_limit_bytes`` (default 20 GB, ``--cache-limit-gb``),
+never the one just used; each removal is logged as a warning (which the
+command line prints). A salo32 frame takes about 4.4 MB on disk (points plus
+the compact truth): a 300-frame sequence is about 1.3 GB.
 """
 
 from __future__ import annotations
@@ -20,6 +29,8 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
+import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +40,8 @@ log = logging.getLogger(__name__)
 # The paper's sensor, its stated noise class (2 cm, 1 sigma).
 DEFAULT_SENSOR = "salo32"
 DEFAULT_NOISE_STD_M = 0.02
+# The cache's default size cap: the table's six 300-frame salo32 sequences (8 GB) and the studies' fit.
+DEFAULT_CACHE_LIMIT_BYTES = 20 * 10**9
 
 
 @dataclass(frozen=True)
@@ -141,9 +154,11 @@ def _complete(folder: Path, frames: int) -> bool:
         return False
 
 
-def ensure_sequence(spec: SequenceSpec, cache_dir: str | Path, progress: bool = False) -> Path:
+def ensure_sequence(spec: SequenceSpec, cache_dir: str | Path, progress: bool = False,
+                    cache_limit_bytes: int | None = DEFAULT_CACHE_LIMIT_BYTES) -> Path:
     """The folder of ``spec``'s sequence under ``cache_dir``, simulated there if not yet cached.
 
+    Marks it used and then trims the cache to ``cache_limit_bytes`` (``trim_cache``; None: no cap).
     Raises ValueError when the scene's path is too short for the frames asked.
     """
     from tqdm import tqdm
@@ -155,15 +170,89 @@ def ensure_sequence(spec: SequenceSpec, cache_dir: str | Path, progress: bool = 
     folder = Path(cache_dir) / f"{spec.name}-{key}"
     if _complete(folder, spec.frames):
         log.info("sequence %s: cached in %s", spec.name, folder)
-        return folder
-    log.info("sequence %s: simulating %d frames into %s", spec.name, spec.frames, folder)
+    else:
+        log.info("sequence %s: simulating %d frames into %s", spec.name, spec.frames, folder)
+        with tqdm(total=spec.frames, unit="sweep", desc=f"simulate {spec.name}", disable=not progress,
+                  dynamic_ncols=True) as bar:
+            try:
+                simulate_scene(scene, _sensor_model(spec), folder, spec.frames, seed=spec.seed, start_s=spec.start_s,
+                               force=True, on_frame=lambda k, scan: bar.update(1),
+                               info={"command": "experiment suite", "suite_spec": spec.to_dict(), "suite_key": key})
+            except PathTooShort as exc:
+                raise _too_short(spec, exc) from None
+    os.utime(folder)  # used now: the last to be evicted
+    if cache_limit_bytes is not None:
+        trim_cache(cache_dir, cache_limit_bytes, keep=folder)
+    return folder
+
+
+def _too_short(spec: SequenceSpec, exc) -> ValueError:
+    return ValueError(f"sequence {spec.name}: the {spec.scene} path lasts {exc.duration_s:.1f} s, room for "
+                      f"{exc.available} sweeps after {exc.start_s:g} s, not {exc.frames}")
+
+
+def _folder_bytes(folder: Path) -> int:
+    return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+
+
+def trim_cache(cache_dir: str | Path, limit_bytes: int, keep: Path | None = None) -> list[Path]:
+    """Remove the least recently used sequences of ``cache_dir`` until it holds at most ``limit_bytes``.
+
+    Only complete sequence folders (a ``manifest.json``) count and go, oldest
+    modification time first, never ``keep``; each removal is logged as a
+    warning with its size and last use. Returns the removed folders.
+    """
+    from datetime import datetime
+
+    root = Path(cache_dir)
+    if not root.is_dir():
+        return []
+    entries = [(f.stat().st_mtime, f, _folder_bytes(f)) for f in root.iterdir()
+               if f.is_dir() and (f / "manifest.json").is_file()]
+    total = sum(size for _, _, size in entries)
+    removed = []
+    for mtime, folder, size in sorted(entries, key=lambda e: e[0]):
+        if total <= limit_bytes:
+            break
+        if keep is not None and folder.resolve() == Path(keep).resolve():
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        total -= size
+        removed.append(folder)
+        log.warning("sequence cache %s over its %.3g GB cap: removed %s (%.3g GB, last used %s)", root,
+                    limit_bytes / 1e9, folder.name, size / 1e9,
+                    datetime.fromtimestamp(mtime).isoformat(timespec="seconds"))
+    return removed
+
+
+def load_sequence(spec: SequenceSpec, cache_dir: str | Path | None = None, progress: bool = False,
+                  fields: str = "simulated", cache_limit_bytes: int | None = DEFAULT_CACHE_LIMIT_BYTES):
+    """``spec``'s sequence to run on: in memory (``cache_dir`` None: nothing written) or cached on disk.
+
+    fields: what the in-memory frames carry (``simlidar.in_memory``: "simulated", or "truth" for
+    studies that need the per-point truth); a folder always has it all. Raises ValueError when the
+    scene's path is too short for the frames asked.
+    """
+    from simlidar.dataset import open_sequence
+
+    if cache_dir is not None:
+        return open_sequence(ensure_sequence(spec, cache_dir, progress, cache_limit_bytes))
+    from tqdm import tqdm
+
+    from simlidar.in_memory import simulate_in_memory
+    from tools.runners import PathTooShort
+
+    scene = _build(spec)
+    sensor = _sensor_model(spec)
+    available = scene.sweeps_available(sensor, spec.start_s)
+    if spec.frames > available:
+        raise _too_short(spec, PathTooShort(spec.scene, float(scene.trajectory.duration_s), available, spec.start_s,
+                                            spec.frames))
+    log.info("sequence %s: simulating %d frames in memory", spec.name, spec.frames)
     with tqdm(total=spec.frames, unit="sweep", desc=f"simulate {spec.name}", disable=not progress,
               dynamic_ncols=True) as bar:
-        try:
-            simulate_scene(scene, _sensor_model(spec), folder, spec.frames, seed=spec.seed, start_s=spec.start_s,
-                           force=True, on_frame=lambda k, scan: bar.update(1),
-                           info={"command": "experiment suite", "suite_spec": spec.to_dict(), "suite_key": key})
-        except PathTooShort as exc:
-            raise ValueError(f"sequence {spec.name}: the {spec.scene} path lasts {exc.duration_s:.1f} s, room for "
-                             f"{exc.available} sweeps after {exc.start_s:g} s, not {exc.frames}") from None
-    return folder
+        return simulate_in_memory(scene.world, scene.trajectory, sensor, spec.frames, seed=spec.seed,
+                                  t_start=spec.start_s, fields=fields, name=spec.name,
+                                  on_frame=lambda k: bar.update(1),
+                                  info={"suite_spec": spec.to_dict(), **scene.info,
+                                        "noise_std_m": sensor.range_noise_std_m})

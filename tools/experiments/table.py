@@ -33,7 +33,7 @@ from paramspec import value_text
 
 from .peer import PEERS
 from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import SequenceSpec, ensure_sequence, table_suite
+from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 
 log = logging.getLogger(__name__)
 
@@ -115,16 +115,24 @@ def segment_errors_per_100m(T_gt: np.ndarray, T_est: np.ndarray, length_m: float
     return s.t_err_ratio * 100.0
 
 
-def degeneracy_summary(sequence_dir: Path) -> dict:
-    """Figures of a sequence's ``degeneracy.csv`` (dimensionless translational eigenvalues, per point)."""
-    with open(Path(sequence_dir) / "degeneracy.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    t0 = np.array([float(r["t_eig0"]) for r in rows])
-    t2 = np.array([float(r["t_eig2"]) for r in rows])
-    weak = np.array([[float(r["weak_x"]), float(r["weak_y"]), float(r["weak_z"])] for r in rows])
+def degeneracy_summary(sequence) -> dict:
+    """Figures of a sequence's per-frame degeneracy (dimensionless translational eigenvalues, per point).
+
+    sequence: a folder (its ``degeneracy.csv``) or a sequence in memory (its ``degeneracy``, the same figures).
+    """
+    if isinstance(sequence, (str, Path)):
+        with open(Path(sequence) / "degeneracy.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        t0 = np.array([float(r["t_eig0"]) for r in rows])
+        t2 = np.array([float(r["t_eig2"]) for r in rows])
+        weak = np.array([[float(r["weak_x"]), float(r["weak_y"]), float(r["weak_z"])] for r in rows])
+    else:
+        t0 = np.array([d.translation_eigenvalues[0] for d in sequence.degeneracy])
+        t2 = np.array([d.translation_eigenvalues[2] for d in sequence.degeneracy])
+        weak = np.array([d.weakest_translation for d in sequence.degeneracy])
     worst = int(np.argmin(t0))
     return {
-        "frames": len(rows),
+        "frames": len(t0),
         "t_eig0_min": float(t0.min()), "t_eig0_median": float(np.median(t0)),
         "t_condition_median": float(np.median(t2 / np.maximum(t0, 1e-12))),
         "weak_frames": int((t0 < WEAK_TRANSLATION_EIGENVALUE).sum()),
@@ -191,7 +199,7 @@ def score_method(res: MethodResult, sequence, params: TableParams) -> MethodResu
 @dataclass
 class SequenceResult:
     spec: SequenceSpec
-    folder: Path
+    folder: Path | None  # None: simulated in memory
     gt: np.ndarray
     degeneracy: dict
     methods: dict[str, MethodResult]
@@ -214,22 +222,24 @@ class TableResult:
         return (float(np.mean(v)), float(np.std(v)), len(v)) if len(v) else (float("nan"), float("nan"), 0)
 
 
-def run_table(params: TableParams, cache_dir: str | Path, record: RunRecord | None = None,
-              progress: bool = False) -> TableResult:
-    """Run every method on every sequence; with ``record``, write each sequence's poses as it finishes."""
-    from simlidar.dataset import open_sequence
+def run_table(params: TableParams, cache_dir: str | Path | None, record: RunRecord | None = None,
+              progress: bool = False, cache_limit_bytes: int | None = DEFAULT_CACHE_LIMIT_BYTES) -> TableResult:
+    """Run every method on every sequence; with ``record``, write each sequence's poses as it finishes.
 
+    cache_dir: the sequence cache (``suite.ensure_sequence``), or None: each sequence simulated in
+    memory, used by every method, then dropped (nothing but the results is written).
+    """
     results = []
     for spec in params.sequences:
-        folder = ensure_sequence(spec, cache_dir, progress)
-        seq = open_sequence(folder)
+        seq = load_sequence(spec, cache_dir, progress, cache_limit_bytes=cache_limit_bytes)
+        folder = seq.path if cache_dir is not None else None
         methods = {}
         for m in params.methods:
             log.info("table: %s on %s", m, spec.name)
             methods[m] = run_method(m, seq, params, progress)
             if record is not None:
                 _write_method_files(record, spec.name, methods[m])
-        results.append(SequenceResult(spec, folder, seq.poses, degeneracy_summary(folder), methods))
+        results.append(SequenceResult(spec, folder, seq.poses, degeneracy_summary(folder or seq), methods))
         if record is not None:
             from simlidar.formats.kitti import write_kitti_poses
 
@@ -414,7 +424,8 @@ def write_table(result: TableResult, record: RunRecord) -> None:
     write_json(record.path("results.json"), {
         "experiment": "table", "params": record.params,
         "table": rows, "salo_vs_bl": salo_vs_bl(result),
-        "sequences": {s.spec.name: {"spec": s.spec.to_dict(), "folder": str(s.folder), "degeneracy": s.degeneracy,
+        "sequences": {s.spec.name: {"spec": s.spec.to_dict(), "folder": None if s.folder is None else str(s.folder),
+                                    "degeneracy": s.degeneracy,
                                     "metrics": {m: r.metrics for m, r in s.methods.items() if r.available},
                                     "segment_errors_m_per_100m": {m: r.segment_errors_m for m, r in s.methods.items()}}
                       for s in result.sequences},
@@ -468,7 +479,8 @@ def load_table_result(run_dir: str | Path) -> TableResult:
                 r.available = False
             methods[m] = r
         gt = read_kitti_poses(run / "poses" / spec.name / "gt.txt")
-        sequences.append(SequenceResult(spec, Path(stored["folder"]), gt, stored["degeneracy"], methods))
+        folder = None if stored.get("folder") is None else Path(stored["folder"])
+        sequences.append(SequenceResult(spec, folder, gt, stored["degeneracy"], methods))
     return TableResult(params, sequences)
 
 

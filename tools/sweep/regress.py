@@ -96,10 +96,11 @@ def suite_spec(odometry_command: str | None = None, suite: SweepSpec | None = No
 
 
 def _suite_identity(spec: SweepSpec) -> dict:
-    """What a baseline must match: the sequences and the variants' names. Not whether sequences are
-    kept, nor an external command's text (its options are what a user's CI is testing)."""
+    """What a baseline must match: the sequences and the variants' names. Not where sequences live or
+    whether they are kept, nor an external command's text (its options are what a user's CI is testing)."""
     data = spec.to_dict()
     data.pop("keep_sequences")
+    data.pop("sequences", None)
     data.pop("commands")
     return json.loads(json.dumps(data))
 

@@ -116,7 +116,7 @@ def run_sweep(
         for run in plan.todo:
             store.clear_run(run.key)  # half-written, failed or forced: start from an empty folder
 
-        sims = _sim_jobs(plan, store)
+        sims = _sim_jobs(plan, store, in_memory=spec.sequences == "memory")
         ready = {k: {"sim_key": k, "ok": True, "cached": True, "path": str(store.sequence_dir(k)),
                      "simulate_s": store.sequence_info(k).get("simulate_s")} for k in plan.cached}
         jobs = [_run_job(r, store, command_timeout_s) for r in plan.todo]
@@ -146,12 +146,16 @@ def run_sweep(
     return SweepResult(store, plan, rows, len(jobs), time.perf_counter() - t0, outputs)
 
 
-def _sim_jobs(plan: SweepPlan, store: Store) -> list[SimJob]:
-    first = {}
+def _sim_jobs(plan: SweepPlan, store: Store, in_memory: bool = False) -> list[SimJob]:
+    """The sequences to make; in memory unless asked for disk or one of their runs is an external command."""
+    first, needs_disk = {}, set()
     for run in plan.todo:
         first.setdefault(run.sim_key, run.sim)
+        if run.command is not None:
+            needs_disk.add(run.sim_key)
     return [SimJob(str(store.root), k, first[k].scene, first[k].seed, first[k].scene_overrides, first[k].sensor_model,
-                   first[k].frames, first[k].start_s, first[k].motion_distortion) for k in plan.sims]
+                   first[k].frames, first[k].start_s, first[k].motion_distortion,
+                   in_memory=in_memory and k not in needs_disk) for k in plan.sims]
 
 
 def _run_job(run: RunParams, store: Store, command_timeout_s: float | None) -> RunJob:

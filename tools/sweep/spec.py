@@ -189,8 +189,12 @@ class SweepSpec(Params):
     odometry: dict = param({}, "odometry parameter overrides for every built-in variant")
     configs: dict = param({}, "extra variants: {NAME: {base: VARIANT, KEY: VALUE, ...}}")
     commands: dict = param({}, "external odometries as variants: {NAME: \"command with {sequence} and {out}\"}")
-    keep_sequences: bool = param(True, "keep the simulated sequences for reuse (false: delete each once its "
-                                 "runs are done)")
+    sequences: str = param("memory", "where a sequence lives while its runs use it: memory (each worker "
+                           "simulates it, nothing is written but the runs' poses and metrics) or disk (the store's "
+                           "sequences/ folder; a variant that is an external command always gets one)",
+                           choices=("memory", "disk"))
+    keep_sequences: bool = param(True, "with sequences: disk, keep the simulated sequences for reuse (false: "
+                                 "delete each once its runs are done)")
 
     def to_dict(self) -> dict:
         """The spec as YAML-ready data (configs as their parameter overrides)."""
@@ -209,6 +213,7 @@ class SweepSpec(Params):
             "odometry": self.odometry,
             "configs": {k: v.to_dict() for k, v in self.configs.items()},
             "commands": self.commands,
+            "sequences": self.sequences,
             "keep_sequences": self.keep_sequences,
         }
 

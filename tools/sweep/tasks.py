@@ -35,10 +35,12 @@ DEFAULT_COMMAND_TIMEOUT_S = 3600.0
 
 @dataclass(frozen=True)
 class SimJob:
-    """Simulate one sequence into the store (or find it there).
+    """Simulate one sequence into the store (or find it there), or describe it for the runs to simulate.
 
     scene_overrides: scene parameters (speed included); sensor: the model with
     its noise; frames: sweeps; start_s: path time of the first sweep, s.
+    in_memory: nothing is written: each run task simulates the sequence into
+    memory (``memory_sequence``) and runs on it.
     """
 
     store: str
@@ -50,6 +52,7 @@ class SimJob:
     frames: int
     start_s: float
     motion_distortion: bool
+    in_memory: bool = False
 
 
 @dataclass(frozen=True)
@@ -100,6 +103,8 @@ def simulate_task(job: SimJob, threads: int | None = None) -> dict:
     store = Store(job.store)
     out = store.sequence_dir(job.sim_key)
     outcome = {"sim_key": job.sim_key, "ok": True, "error": None, "cached": True, "path": str(out)}
+    if job.in_memory and not store.sequence_ready(job.sim_key):
+        return {**outcome, "cached": False, "path": None, "in_memory": job, "simulate_s": None}
     if store.sequence_ready(job.sim_key):
         outcome["simulate_s"] = store.sequence_info(job.sim_key).get("simulate_s")
         return outcome
@@ -160,7 +165,16 @@ def run_task(job: RunJob, sim: dict) -> dict:
             {"key": job.key, "sim_key": job.sim_key, "params": job.params, "sequence": sim["path"],
              "config": None if job.config is None else job.config.to_dict(), "command": job.command},
             indent=1, sort_keys=True) + "\n")
-        result = _run_and_evaluate(job, Path(sim["path"]), run_dir, timings)
+        if sim.get("in_memory") is not None:
+            t0 = time.perf_counter()
+            try:
+                sequence = memory_sequence(sim["in_memory"])
+            except Exception as exc:  # reported as a failed simulation, as on disk
+                raise _Failure(f"simulation: {_error_text(exc)}") from None
+            timings["simulate_s"] = time.perf_counter() - t0  # 0 when this process had it already
+            result = _run_and_evaluate(job, sequence, run_dir, timings)
+        else:
+            result = _run_and_evaluate(job, Path(sim["path"]), run_dir, timings)
     except Exception as exc:
         error = str(exc) if isinstance(exc, _Failure) else _error_text(exc)
         if not isinstance(exc, _Failure):
@@ -176,12 +190,42 @@ class _Failure(Exception):
     """A run failure whose message is already user-facing (no exception type prefix)."""
 
 
-def _run_and_evaluate(job: RunJob, sequence_dir: Path, run_dir: Path, timings: dict) -> dict:
+_MEMORY: dict[str, object] = {}  # this process's last in-memory sequence, by sim key
+
+
+def memory_sequence(job: SimJob):
+    """``job``'s sequence simulated into memory (``simlidar.in_memory``), kept for the next run of this process.
+
+    The same simulator, seeds and poses as ``simulate_task`` writes, and the same per-point
+    fields the folder's reader gives to the odometry (ring, float64 time): the same poses result.
+    """
+    if job.sim_key in _MEMORY:
+        return _MEMORY[job.sim_key]
+    from simlidar.in_memory import simulate_in_memory
+    from tools.runners import PathTooShort
+    from tools.worlds import build_scene_world
+
+    _MEMORY.clear()  # one at a time: a 300-frame salo32 sequence is about 800 MB
+    scene = build_scene_world(job.scene, job.seed, job.scene_overrides)
+    available = scene.sweeps_available(job.sensor, job.start_s)
+    if job.frames > available:
+        raise ValueError(str(PathTooShort(job.scene, float(scene.trajectory.duration_s), available, job.start_s,
+                                          job.frames)))
+    seq = simulate_in_memory(scene.world, scene.trajectory, job.sensor, job.frames, seed=job.seed,
+                             t_start=job.start_s, motion_distortion=job.motion_distortion, name=job.sim_key,
+                             info={"sim_key": job.sim_key, **scene.info})
+    _MEMORY[job.sim_key] = seq
+    return seq
+
+
+def _run_and_evaluate(job: RunJob, sequence, run_dir: Path, timings: dict) -> dict:
+    """Run and evaluate over ``sequence``: a folder, or a sequence in memory (our odometry only)."""
     from simlidar.dataset import open_sequence
     from simlidar.formats.kitti import read_kitti_poses
     from tools.runners import RunFiles, evaluate_against_truth, run_method
 
-    seq = open_sequence(sequence_dir)
+    sequence_dir = Path(sequence) if isinstance(sequence, (str, Path)) else None
+    seq = open_sequence(sequence_dir) if sequence_dir is not None else sequence
     poses_path = run_dir / "poses.txt"
     diagnostics = {}
     if job.command is not None:
@@ -239,4 +283,5 @@ def run_external(template: str, sequence_dir: Path, poses_out: Path, log_path: P
         raise _Failure(f"external odometry wrote no poses to {poses_out} (command: {command})")
 
 
-__all__ = ["RunJob", "SimJob", "failed_result", "run_external", "run_task", "simulate_task", "versions"]
+__all__ = ["RunJob", "SimJob", "failed_result", "memory_sequence", "run_external", "run_task", "simulate_task",
+           "versions"]
