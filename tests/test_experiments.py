@@ -466,3 +466,14 @@ def test_cli_commands_parse():
         parser.parse_args(["experiment", "rejectors", "--map-frames", "0"])
     assert parser.parse_args(["experiment", "ncf"]).func is cli_experiment.cmd_ncf
     assert parser.parse_args(["report", "out/x", "--format", "md"]).func is cli_experiment.cmd_report
+
+
+def test_an_experiment_stopped_by_bad_input_leaves_no_run_folder(tmp_path, capsys):
+    from tools import cli
+
+    out = tmp_path / "ncf"
+    assert cli.main(["experiment", "ncf", "--quick", "--no-progress", "--sensor", str(tmp_path / "no.yaml"),
+                     "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no.yaml: cannot read sensor file" in err
+    assert not out.exists()

@@ -63,6 +63,14 @@ def _common(p, name: str) -> None:
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
 
 
+def _discard(out: Path, fresh: bool) -> None:
+    """A run stopped by bad input leaves nothing: remove its run folder if this run made it."""
+    if fresh:
+        import shutil
+
+        shutil.rmtree(out, ignore_errors=True)
+
+
 def _cache(args) -> Path | None:
     """The cache folder with --on-disk, else None: sequences in memory."""
     return args.cache if args.on_disk else None
@@ -233,11 +241,13 @@ def cmd_table(args) -> int:
         )
     except ValueError as exc:
         raise CommandError(str(exc)) from None
+    fresh = not args.out.exists()
     record = RunRecord(args.out, "table", params.to_dict(), command_line()).start()
     try:
         result = run_table(params, _cache(args), record=record, progress=args.progress,
                            cache_limit_bytes=_cache_limit(args))
     except ValueError as exc:
+        _discard(args.out, fresh)
         raise CommandError(str(exc)) from None
     write_table(result, record)
     print((args.out / "table.md").read_text(), end="")
@@ -287,11 +297,13 @@ def cmd_rejectors(args) -> int:
     params = RejectorStudyParams(pairs=args.pairs or (4 if args.quick else 100), levels=levels, targets=targets,
                                  sequences=specs, seed=args.seed, config_overrides=_config_overrides(args.config_set),
                                  map_frames=args.map_frames)
+    fresh = not args.out.exists()
     record = RunRecord(args.out, "rejectors", params.to_dict(), command_line()).start()
     try:
         result = run_rejector_study(params, _cache(args), progress=args.progress,
                                     cache_limit_bytes=_cache_limit(args))
     except ValueError as exc:
+        _discard(args.out, fresh)
         raise CommandError(str(exc)) from None
     write_rejector_study(result, record)
     for kind, f in result.finding.items():
@@ -329,11 +341,13 @@ def cmd_ncf(args) -> int:
     params = NcfStudyParams(noise_levels_m=levels, scans=tuple(scans),
                             max_points_per_scan=args.max_points or (1500 if args.quick else None), seed=args.seed,
                             config_overrides=_config_overrides(args.config_set))
+    fresh = not args.out.exists()
     record = RunRecord(args.out, "ncf", params.to_dict(), command_line()).start()
     try:
         result = run_ncf_study(params, _cache(args), progress=args.progress,
                                cache_limit_bytes=_cache_limit(args))
     except ValueError as exc:
+        _discard(args.out, fresh)
         raise CommandError(str(exc)) from None
     write_ncf_study(result, record)
     for r in result.overview:
