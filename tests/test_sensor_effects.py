@@ -185,3 +185,17 @@ def test_effect_keys_in_a_sensor_file_round_trip_and_bad_values_are_one_line_err
         with pytest.raises(SensorError, match=rf"bad.yaml.*{problem}") as info:
             from_dict({**data, key: value}, origin=str(tmp_path / "bad.yaml"))
         assert "\n" not in str(info.value)
+
+
+def test_the_effect_sensor_files_for_the_ncf_study_load_with_one_effect_each():
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "tools/experiments/effects"
+    base = load_sensor("salo32").to_dict()
+    files = sorted(folder.glob("*.yaml"))
+    assert [f.stem for f in files] == ["salo32-divergence", "salo32-incidence", "salo32-intensity"]
+    for f in files:
+        on = load_sensor_file(f).to_dict()
+        changed = {k for k in on if on[k] != base.get(k)} - {"name", "description"}
+        assert changed and changed <= {"beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m",
+                                       "incidence_noise_max_factor", "intensity_incidence_exponent"}, (f, changed)
