@@ -29,7 +29,9 @@ sequence's own sensor model:
 
 - ring, azimuth_index: from the firing index (exact);
 - time_s: the sensor's firing table at (ring, column) (exact: the simulator's own formula);
-- range_m: the length of the ``.bin`` point (the measured range, float32 rounding: <= 1.2e-7 x range);
+- range_m: the length of the ``.bin`` point (the measured range, float32 rounding: <= 1.2e-7 x range;
+  a return measured at exactly 0 m, possible only with ``min_range_m`` 0, has no direction and
+  its true_xyz is then the firing position);
 - true_xyz: ``t(t_k) + true_range * R(t_k) b``, the beam ``b`` being the unit vector of the ``.bin``
   point (measured points lie on their beam, so jitter and divergence are carried), ``R, t`` the
   sensor's pose at the firing time in the sweep-start frame, from the knots (exact at the knots,
