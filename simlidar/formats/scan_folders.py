@@ -7,7 +7,9 @@ frame, with an optional ``.npy`` sidecar of per-point fields each. Its readers:
   ``calib.txt``), ground truth from the camera-frame poses file converted to
   the lidar frame with ``calib.txt``'s ``Tr``;
 - ``open_scan_folder``: a folder of ``.bin`` / ``.ply`` scans (or its
-  ``velodyne/``), with ``sensor.yaml``, ``poses.txt`` and ``times.txt`` when present.
+  ``velodyne/``), with ``sensor.yaml``, ``poses.txt``, ``times.txt`` and per-point
+  fields (``fields/NNNNNN.npy``, a structured array per scan: ``ring``, ``time_s``,
+  ...) when present.
 
 The simulator's own folder layout is ``simlidar.formats.salo``.
 """
@@ -129,10 +131,17 @@ def open_kitti_folder(path: Path, sensor: LidarModel | None = None, poses: str |
 
 
 # ---------------------------------------------------------------- plain scan folders
+FIELDS_FOLDER = "fields"
+
+
 def open_scan_folder(path: Path, sensor: LidarModel | None = None, poses: str | Path | None = None,
                      topic: str | None = None) -> Sequence:
     """A folder of ``.bin`` / ``.ply`` scans. poses: a KITTI pose file (default ``poses.txt`` in the
-    folder), made relative to its first pose. topic: does not apply."""
+    folder), made relative to its first pose. topic: does not apply.
+
+    Per-point fields of ``.bin`` scans: ``fields/<scan stem>.npy`` beside ``velodyne/`` (or
+    the scans), one structured array per scan with one record per point (``ring``,
+    ``time_s``, ...; ``Frame.field``); all scans must have one, or none."""
     folder = path / "velodyne" if (path / "velodyne").is_dir() else path
     scans = _scan_list(folder, (".bin", ".ply"))
     if not scans:
@@ -151,7 +160,19 @@ def open_scan_folder(path: Path, sensor: LidarModel | None = None, poses: str | 
             raise DatasetError(f"{pf}: {len(rel_poses)} poses for {len(scans)} scans")
         rel_poses = se3.inverse(rel_poses[0]) @ rel_poses[: len(scans)]
     times = read_times(path / "times.txt") if (path / "times.txt").is_file() else None
-    return Sequence(path, "scans", scans, sensor, rel_poses, times)
+    return Sequence(path, "scans", scans, sensor, rel_poses, times, sidecar_files=_field_files(path, scans))
 
 
-__all__ = ["Sequence", "check_bin_sizes", "is_kitti_folder", "open_kitti_folder", "open_scan_folder"]
+def _field_files(path: Path, scans: list[Path]) -> list[Path] | None:
+    """``fields/<stem>.npy`` of every ``.bin`` scan, or None when the folder has no ``fields/``."""
+    folder = path / FIELDS_FOLDER
+    if not folder.is_dir():
+        return None
+    files = [folder / f"{s.stem}.npy" for s in scans]
+    missing = [f for f, s in zip(files, scans, strict=True) if s.suffix != ".bin" or not f.is_file()]
+    if missing:
+        raise DatasetError(f"{missing[0]}: missing; {folder} must hold one .npy of per-point fields per .bin scan")
+    return files
+
+
+__all__ = ["FIELDS_FOLDER", "Sequence", "check_bin_sizes", "is_kitti_folder", "open_kitti_folder", "open_scan_folder"]
