@@ -29,9 +29,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    from . import demo, evaluate, experiment, export, odometry, scenes, sensors, simulate, sweep
+    from . import bench, demo, evaluate, experiment, export, odometry, scenes, sensors, simulate, sweep
 
-    for module in (simulate, odometry, sensors, demo, evaluate, scenes, experiment, sweep, export):
+    for module in (simulate, odometry, sensors, demo, evaluate, scenes, experiment, sweep, bench, export):
         module.add_commands(sub)
     return parser
 

@@ -112,11 +112,10 @@ def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[
     return out
 
 
-def simulate(seq: SuiteSequence, progress=None):
-    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
+def _prepare(seq: SuiteSequence):
+    """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
     from scenes import build_scene
     from scenes.families import draw_family_params, family_scene
-    from simlidar.in_memory import simulate_in_memory
     from simlidar.sensor import load_sensor
     from tools.worlds import world_of_scene
 
@@ -132,8 +131,27 @@ def simulate(seq: SuiteSequence, progress=None):
     if seq.frames > available:
         raise ValueError(f"{seq.name}: the path has room for {available} sweeps after {start:.1f} s, "
                          f"not {seq.frames}")
-    return simulate_in_memory(world, scene.trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
+    return world, scene.trajectory, sensor, start
+
+
+def simulate(seq: SuiteSequence, progress=None):
+    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
+    from simlidar.in_memory import simulate_in_memory
+
+    world, trajectory, sensor, start = _prepare(seq)
+    return simulate_in_memory(world, trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
                               fields=seq.kind, name=seq.name, on_frame=progress)
+
+
+def simulate_to_folder(seq: SuiteSequence, out, force: bool = False):
+    """A suite sequence as a sequence folder (``simlidar.simulate.simulate_sequence``): the "real" kind
+    without motion distortion (its per-point fields are the staging's to leave out). Returns the path."""
+    from simlidar.simulate import simulate_sequence
+
+    world, trajectory, sensor, start = _prepare(seq)
+    return simulate_sequence(world, trajectory, sensor, out, frames=seq.frames, seed=seq.seed, t_start=start,
+                             motion_distortion=seq.kind == "simulated", force=force,
+                             info={"command": "bench", "suite_sequence": asdict(seq)})
 
 
 # ---------------------------------------------------------------- methods

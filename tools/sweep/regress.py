@@ -100,8 +100,9 @@ def method_suite_spec(methods: list[str], suite: SweepSpec | None = None, comman
     """The suite's sequences with ``methods`` as its variants.
 
     methods: names of ``tools.methods`` (ours, including ``default``; peers; plug-ins) or keys of
-    ``commands`` (external commands); ``tools.methods.MethodError`` for an unknown one. overrides: our configurations' changes, nested by stage
-    (``--set``). fields: the per-point fields handed to the methods (default: the suite's).
+    ``commands`` (external commands; ``tools.methods.MethodError`` for an unknown name). overrides:
+    our configurations' changes, nested by stage (``--set``). fields: the per-point fields handed to
+    the methods (default: the suite's).
     """
     from tools.methods import method_from_name
 
