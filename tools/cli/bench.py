@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import CommandError, command_line, parse_config_set, real_number, whole_number
+from .common import CommandError, parse_config_set, real_number, whole_number
 
 
 def add_commands(sub) -> None:
@@ -46,6 +46,7 @@ def add_commands(sub) -> None:
 
 
 def cmd_bench(args) -> int:
+    import shlex
     import sys
 
     from tools.leaderboard import SuiteError, run_bench
@@ -78,7 +79,7 @@ def cmd_bench(args) -> int:
     families = tuple(f.strip() for f in args.families.split(",") if f.strip()) if args.families else ()
     try:
         result = run_bench(suite, methods, out, fields=fields, frames=args.frames, families=families,
-                           rerun=tuple(args.rerun), timeout_s=args.timeout, command=" ".join(command_line()),
+                           rerun=tuple(args.rerun), timeout_s=args.timeout, command=shlex.join(["salo", *args.argv]),
                            on_event=lambda text: print(text, file=sys.stderr, flush=True))
     except SuiteError as exc:
         raise CommandError(str(exc)) from None

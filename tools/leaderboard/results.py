@@ -87,9 +87,11 @@ def run_one(method, sequence, out: str | Path, fields, *, timeout_s: float, work
     result = {"method": method.name, "label": method.label, "kind": method.kind, "method_key": method.key,
               "sequence": sequence.id, "family": sequence.family, "sequence_key": sequence.key,
               "sequence_path": str(sequence.path), "frames": len(seq)}
+    fields = tuple(sequence.fields if sequence.fields is not None else fields)
+    result["fields"] = list(fields)
     t0 = time.perf_counter()
     try:
-        output = run_method_staged(method, seq, fields=sequence.fields if sequence.fields is not None else fields,
+        output = run_method_staged(method, seq, fields=fields,
                                    workdir=workdir, log_path=folder / "command.log", timeout_s=timeout_s,
                                    on_frame=on_frame)
         write_kitti_poses(folder / "poses.txt", output.poses)
