@@ -46,8 +46,8 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def _span(dist: np.ndarray, first: int, last: int) -> tuple[float, float]:
     """A frame run as a distance interval, half a frame's travel wider on each side, m."""
-    lo = dist[first] - 0.5 * (dist[min(first + 1, len(dist) - 1)] - dist[first])
-    hi = dist[last] + 0.5 * (dist[last] - dist[max(last - 1, 0)])
+    lo = max(0.0, dist[first] - 0.5 * (dist[min(first + 1, len(dist) - 1)] - dist[first]))
+    hi = min(float(dist[-1]), dist[last] + 0.5 * (dist[last] - dist[max(last - 1, 0)]))
     return float(lo), float(max(hi, lo + 0.3))
 
 
@@ -99,7 +99,8 @@ def draw_error_over_distance(ax, strip, gt: np.ndarray, estimates: dict, truth_w
     strip.set_yticks(np.arange(len(rows)) + 0.5,
                      [f"{r}: weak" if r == "truth" else f"{r}: own flag" for r in rows][::-1], fontsize=8.5)
     strip.set_ylim(0, max(len(rows), 1))
-    strip.set_xlim(0, float(dist[-1]) if dist[-1] > 0 else 1.0)
+    for a in (ax, strip):
+        a.set_xlim(0, float(dist[-1]) if dist[-1] > 0 else 1.0)
     strip.set_xlabel("distance travelled along the ground truth, m")
     strip.grid(True, axis="x", alpha=0.3)
 
