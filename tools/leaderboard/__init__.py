@@ -104,6 +104,8 @@ def run_bench(suite: str | Path, methods: list, out: str | Path, *, fields=None,
     say("writing the leaderboard")
     shown, results = _on_page(out, methods, sequences)
     outputs = write_leaderboard(out, str(suite), sequences, shown, results, history)
+    history[-1]["total_s"] = round(time.perf_counter() - t0, 1)  # the page and its figures included
+    atomic_write_text(out / HISTORY_FILE, json.dumps(history, indent=1) + "\n")
     return BenchResult(sequences, results, ran, reused, time.perf_counter() - t0, outputs)
 
 
@@ -148,12 +150,15 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
     from . import figures
     from .page import family_rows, table_markdown
 
-    last = history[-1]
     lines = [f"# Leaderboard: {suite} suite", "",
-             f"Made by `{last['command'] or 'run_bench'}` on {last['started_utc']} in {last['seconds']:.0f} s "
-             f"({last['ran']} runs, {last['reused']} reused from earlier benches; every command in "
-             f"`{HISTORY_FILE}`). {len(sequences)} sequences, {len(methods)} methods: "
-             + ", ".join(f"{m.label} ({m.kind})" for m in methods) + f"; `default` is `{DEFAULT_VARIANT}`.", "",
+             f"{len(sequences)} sequences, {len(methods)} methods: "
+             + ", ".join(f"{m.label} ({m.kind})" for m in methods) + f"; `default` is `{DEFAULT_VARIANT}`. "
+             f"Made by these commands (`{HISTORY_FILE}`), each with its wall time and the runs it did "
+             "(a stored result of the same method on the same sequence is reused):", ""]
+    lines += [f"- `{h['command'] or 'run_bench'}`: {h['started_utc']}, {h['ran']} runs and {h['reused']} reused "
+              f"in {h['seconds']:.0f} s" + (f" ({h['total_s']:.0f} s with the page)" if "total_s" in h else "")
+              for h in history[-10:]]
+    lines += ["",
              "Every method ran on the sensor's data only (scans, per-point ring and time unless the kind says "
              "otherwise, the sensor model, times), without the ground truth. Figures are means over a family's "
              "sequences: KITTI t_err and r_err over 50-200 m segments, the SE(3)-aligned ATE, the frame-to-frame "
