@@ -63,7 +63,7 @@ LABELS = {"default": "default", "bl": "BL", "ncf": "NCF", "salo": "SALO", "bl-ma
 def method_label(name: str) -> str:
     """A method's label in tables and plots: ``LABELS``' for ours and the peers, else its name."""
     base, plus, rest = name.partition("+")
-    return LABELS.get(base, base) + (plus + rest if plus else "") if base in LABELS else name
+    return LABELS[base] + plus + rest if base in LABELS else name
 
 
 class MethodError(ValueError):
