@@ -99,6 +99,10 @@ def draw_error_over_distance(ax, strip, gt: np.ndarray, estimates: dict, truth_w
     strip.set_yticks(np.arange(len(rows)) + 0.5,
                      [f"{r}: weak" if r == "truth" else f"{r}: own flag" for r in rows][::-1], fontsize=8.5)
     strip.set_ylim(0, max(len(rows), 1))
+    if not any(np.any(truth_weak if name == "truth" else own_weak[name]) for name in rows):
+        strip.text(0.5, 0.5, "no weak frame: " + ("neither the truth nor any method flags one" if own_weak else
+                                                   "the truth flags none"),
+                   transform=strip.transAxes, ha="center", va="center", fontsize=9, color="0.35")
     for a in (ax, strip):
         a.set_xlim(0, float(dist[-1]) if dist[-1] > 0 else 1.0)
     strip.set_xlabel("distance travelled along the ground truth, m")
@@ -126,10 +130,10 @@ def error_vs_eigenvalue_png(path, gt: np.ndarray, estimates: dict, t_eig0: np.nd
                             title: str) -> Path:
     """Each frame's translation error (m per frame, frame k-1 to k) against the truth's weakest eigenvalue at k."""
     from odometry.metrics import relative_pose_errors
-    from tools.experiments.plots import _figure, save_png
+    from tools.experiments.plots import _figure, _plain_log_ticks, save_png
 
     colors = method_colors(estimates)
-    fig = _figure(figsize=(8.0, 4.8))
+    fig = _figure(figsize=(8.0, 5.2))
     ax = fig.subplots()
     eig = np.maximum(np.asarray(t_eig0, dtype=float), 1e-6)
     for label, poses in estimates.items():
@@ -143,10 +147,12 @@ def error_vs_eigenvalue_png(path, gt: np.ndarray, estimates: dict, t_eig0: np.nd
     ax.axvline(threshold, color="0.3", ls="--", lw=1, label=f"weak below {threshold:g}")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    _plain_log_ticks(ax)
     ax.set_xlabel("smallest translational eigenvalue of the truth's information per return (log)")
     ax.set_ylabel("translation error of the frame, m (log)")
     ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=8.5, markerscale=2, loc="best", framealpha=0.9)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6), fontsize=8.5, markerscale=2)
     ax.set_title(title)
     return save_png(fig, path)
 
