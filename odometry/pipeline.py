@@ -549,25 +549,44 @@ class DegenerateStretch:
 
 def degenerate_stretches(diagnostics: list[FrameDiagnostics], min_gap: int = 1) -> list[DegenerateStretch]:
     """The runs of degenerate (or remapped) frames, merged across gaps shorter than ``min_gap`` frames."""
-    weak = [d for d in diagnostics if d.degenerate or d.remapped]
-    out: list[list[FrameDiagnostics]] = []
-    for d in weak:
-        if out and d.frame - out[-1][-1].frame <= min_gap:
-            out[-1].append(d)
+    return stretches_of(np.array([d.frame for d in diagnostics], dtype=int),
+                        np.array([bool(d.degenerate or d.remapped) for d in diagnostics], dtype=bool),
+                        np.array([d.weakest_direction for d in diagnostics], dtype=float).reshape(-1, 3),
+                        np.array([d.translation_eigenvalues[0] for d in diagnostics], dtype=float),
+                        np.array([d.remapped > 0 for d in diagnostics], dtype=bool), min_gap)
+
+
+def stretches_of(frames: np.ndarray, weak: np.ndarray, directions: np.ndarray, eigenvalues: np.ndarray,
+                 remapped: np.ndarray | None = None, min_gap: int = 1) -> list[DegenerateStretch]:
+    """The runs of ``weak`` frames, merged across gaps shorter than ``min_gap`` frames.
+
+    frames: (N,) frame numbers, ascending. weak: (N,) bool. directions: (N, 3) weakest
+    translational direction per frame (lidar frame; sign arbitrary). eigenvalues: (N,) the
+    smallest translational eigenvalue per frame. remapped: (N,) bool, frames whose update kept
+    the prior (default none). Used for a run's own diagnostics (``degenerate_stretches``) and
+    for the simulator's truth (a sequence's ``degeneracy.csv``).
+    """
+    remapped = np.zeros(len(frames), dtype=bool) if remapped is None else np.asarray(remapped, dtype=bool)
+    out: list[list[int]] = []
+    for i in np.flatnonzero(weak):
+        if out and frames[i] - frames[out[-1][-1]] <= min_gap:
+            out[-1].append(int(i))
         else:
-            out.append([d])
+            out.append([int(i)])
     stretches = []
     for run in out:
-        dirs = np.array([d.weakest_direction for d in run if np.all(np.isfinite(d.weakest_direction))])
+        dirs = directions[run]
+        dirs = dirs[np.all(np.isfinite(dirs), axis=1)]
         if len(dirs):
-            dirs *= np.sign(dirs @ dirs[0])[:, None]  # eigenvectors have no sign: align them first
+            dirs = dirs * np.sign(dirs @ dirs[0])[:, None]  # eigenvectors have no sign: align them first
             mean = dirs.mean(axis=0)
             mean /= np.linalg.norm(mean)
         else:
             mean = np.full(3, np.nan)
-        eig = [d.translation_eigenvalues[0] for d in run if np.isfinite(d.translation_eigenvalues[0])]
-        stretches.append(DegenerateStretch(run[0].frame, run[-1].frame, mean, float(min(eig, default=np.nan)),
-                                           sum(d.remapped > 0 for d in run)))
+        eig = eigenvalues[run]
+        eig = eig[np.isfinite(eig)]
+        stretches.append(DegenerateStretch(int(frames[run[0]]), int(frames[run[-1]]), mean,
+                                           float(eig.min()) if len(eig) else float("nan"), int(remapped[run].sum())))
     return stretches
 
 
@@ -626,4 +645,4 @@ def write_diagnostics_csv(path: str | Path, diagnostics: list[FrameDiagnostics])
     atomic_write_text(path, buf.getvalue())
 
 
-__all__ = ["Odometry", "OdometryError", "run_sequence"]
+__all__ = ["DegenerateStretch", "Odometry", "OdometryError", "degenerate_stretches", "run_sequence", "stretches_of"]

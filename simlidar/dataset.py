@@ -10,6 +10,8 @@ rosbag2    a folder with ``metadata.yaml``, or an      ``simlidar.formats.rosbag
            ``.mcap`` / ``.db3`` file
 salo       a folder with ``manifest.json``             ``simlidar.formats.salo.open_salo``
 kitti      ``calib.txt`` beside ``velodyne/``          ``simlidar.formats.scan_folders.open_kitti_folder``
+pcd        a folder (or its ``velodyne/``) of          ``simlidar.formats.scan_folders.open_pcd_folder``
+           ``.pcd`` scans only
 scans      any other folder (``.bin`` / ``.ply``)      ``simlidar.formats.scan_folders.open_scan_folder``
 =========  ==========================================  =========================================
 
@@ -49,6 +51,7 @@ READERS: tuple[SequenceReader, ...] = (
     SequenceReader("rosbag2", rosbag.is_bag, rosbag.open_bag),
     SequenceReader("salo", salo.is_salo, salo.open_salo),
     SequenceReader("kitti", scan_folders.is_kitti_folder, scan_folders.open_kitti_folder),
+    SequenceReader("pcd", scan_folders.is_pcd_folder, scan_folders.open_pcd_folder),
     SequenceReader("scans", Path.is_dir, scan_folders.open_scan_folder),
 )
 

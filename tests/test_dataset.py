@@ -123,7 +123,7 @@ def test_open_sequence_asks_the_readers_in_order_and_each_names_its_kind(tmp_pat
     from simlidar.dataset import READERS
     from tools.export import export_rosbag, export_scans
 
-    assert [r.name for r in READERS] == ["rosbag2", "salo", "kitti", "scans"]  # the catch-all folder reader last
+    assert [r.name for r in READERS] == ["rosbag2", "salo", "kitti", "pcd", "scans"]  # the catch-all reader last
     sim = simulate(tmp_path / "sim", frames=2)
     seq = open_sequence(sim)
     kitti = tmp_path / "kitti"
@@ -131,6 +131,7 @@ def test_open_sequence_asks_the_readers_in_order_and_each_names_its_kind(tmp_pat
     (kitti / "calib.txt").write_text("Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n")
     write_bin(kitti / "velodyne" / "000000.bin", np.ones((3, 3)), np.zeros(3))
     sources = {"salo": sim, "kitti": kitti, "scans": export_scans(seq, tmp_path / "ply", "ply").path,
+               "pcd": export_scans(seq, tmp_path / "pcd", "pcd").path,
                "rosbag2": export_rosbag(seq, tmp_path / "bag").path}
     for reader in READERS:
         path = sources[reader.name]

@@ -275,30 +275,66 @@ def test_regress_passes_against_its_own_baseline_and_fails_when_an_error_grows(t
 
 
 @pytest.mark.slow
-def test_regress_evaluates_an_external_odometry_command(tmp_path, capsys):
-    script = tmp_path / "fake_odometry.py"
-    script.write_text(textwrap.dedent("""
+def test_regress_guards_a_method_and_fails_a_copy_of_the_truth_and_a_constant_velocity_guess(tmp_path, capsys):
+    # The user's real method: our odometry's command line, run on the staged folder (no ground truth in it).
+    real = f"{sys.executable} -m tools.cli odometry {{sequence}} --variant bl --out {{out}}"
+    cheat = "cp {sequence}/poses.txt {out}"
+    guess = tmp_path / "constant_velocity.py"  # 0.5 m per frame straight ahead, whatever the scans say
+    guess.write_text(textwrap.dedent("""
         import sys
+        from pathlib import Path
         import numpy as np
-        sequence, out = sys.argv[1], sys.argv[2]
-        poses = np.loadtxt(f"{sequence}/poses.txt").reshape(-1, 12)
-        poses[1:, [3, 7, 11]] += np.random.default_rng(0).normal(0, 0.05, (len(poses) - 1, 3))
+        scans, out = Path(sys.argv[1]), sys.argv[2]
+        n = len(list(scans.glob("*.bin")))
+        poses = np.tile(np.eye(4)[:3].ravel(), (n, 1))
+        poses[:, 3] = 0.5 * np.arange(n)
         np.savetxt(out, poses, fmt="%.9f")
     """))
-    suite, baseline = tmp_path / "suite.yaml", tmp_path / "mine.json"
-    suite.write_text(yaml.safe_dump(SUITE))
-    command = f"{sys.executable} {script} {{sequence}} {{out}}"
-    common = ("--suite", suite, "--out", tmp_path / "out", "--odometry-command", command, "--name", "fake")
-    code, text = _regress(capsys, *common)
-    assert code == 2 and "--baseline" in text
-    code, text = _regress(capsys, *common, "--baseline", baseline, "--update")
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(yaml.safe_dump({**SUITE, "frames": 6, "speed_m_s": 8.0, "start_s": 4.0}))
+    common = ("--suite", suite, "--out", tmp_path / "out", "--keep-sequences", "--baseline-dir", tmp_path / "b",
+              "--method", "mine")
+    code, text = _regress(capsys, *common, "--odometry-command", real)
+    assert code == 2 and "no baseline file for method 'mine'" in text and "--update" in text
+    code, text = _regress(capsys, *common, "--odometry-command", real, "--update")
     assert code == 0, text
-    (run,) = json.loads(baseline.read_text())["runs"].items()
-    assert run[0] == "city/seed0/vlp16/noise0.02/fake"
-    # Ground truth plus 5 cm noise per axis on frames 1..3: ATE of that size, not zero, not metres.
-    assert 0.02 < run[1]["ate_rmse_m"] < 0.2
+    doc = json.loads((tmp_path / "b" / "suite" / "mine.json").read_text())
+    (label, figures), = doc["runs"].items()
+    assert doc["method"] == "mine" and label == "city/seed0/vlp16/noise0.02/mine"
+    # The simulator's truth: 6 frames at 8 m/s with 2 cm noise are registered to a few cm.
+    assert figures["ate_aligned_rmse_m"] < 0.05
+    code, text = _regress(capsys, *common, "--odometry-command", real)
+    assert code == 0 and "regress mine PASSED" in text
+    code, text = _regress(capsys, *common, "--odometry-command", cheat)
+    assert code == 1 and "regress mine FAILED" in text and "No such file" in text
+    code, text = _regress(capsys, *common, "--odometry-command", f"{sys.executable} {guess} {{scans}} {{out}}")
+    assert code == 1 and "regress mine FAILED" in text and "grew" in text
+    # A baseline written by the truth-copying command cannot exist: the run fails, nothing is written.
+    code, text = _regress(capsys, *common[:-2], "--method", "cheat", "--odometry-command", cheat, "--update")
+    assert code == 2 and "cannot write a baseline from failed runs" in text
+    assert not (tmp_path / "b" / "suite" / "cheat.json").exists()
+
+
+def test_regress_names_the_flag_that_fixes_a_wrong_method_or_command(tmp_path, capsys):
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(yaml.safe_dump(SUITE))
+    baseline = tmp_path / "mine.json"
+    baseline.write_text(json.dumps({"method": "mine", "suite": {}, "runs": {}}))
+    common = ("--suite", suite, "--out", tmp_path / "out")
+    code, text = _regress(capsys, *common, "--method", "other", "--baseline", baseline, "--odometry-command",
+                          "run {scans} {out}")
+    assert code == 2 and "give --method mine" in text and "--update" not in text
     code, text = _regress(capsys, *common, "--baseline", baseline)
-    assert code == 0 and "regress PASSED" in text
+    assert code == 2 and "give --method mine" in text and "--update" not in text
+    code, text = _regress(capsys, *common, "--method", "x", "--odometry-command", "true")
+    assert code == 2 and "--odometry-command 'true' has no {out} and {scans}" in text
+    assert "commands." not in text
+    code, text = _regress(capsys, *common, "--odometry-command", "run {scans} {out}")
+    assert code == 2 and "needs one --method NAME" in text
+    code, text = _regress(capsys, *common, "--method", "nope")
+    assert code == 2 and "unknown method 'nope'" in text and "peers: kiss-icp" in text
+    code, text = _regress(capsys, *common, "--method", "salo", "--fields", "ring,normal")
+    assert code == 2 and "'normal' is the simulator's ground truth" in text
 
 
 def test_read_table_keeps_text_columns_as_text(tmp_path):

@@ -169,10 +169,24 @@ def export_scene(scene, out: Path) -> Path:
     return out
 
 
+def export_trajectory(trajectory, out: Path, period_s: float = 0.1) -> Path:
+    """Write a trajectory's lidar poses every ``period_s`` s as a KITTI pose file ``out`` (in the world's frame,
+    as ``load_mesh_world`` reads them) and their times beside it, ``<stem>_times.txt``; returns the times file."""
+    from simlidar.formats.atomic import atomic_write_text
+    from simlidar.formats.kitti import format_times, write_kitti_poses
+
+    out = Path(out)
+    times = np.arange(0.0, float(trajectory.duration_s) + 1e-9, period_s)
+    write_kitti_poses(out, trajectory.pose_at(times))
+    times_file = out.with_name(out.stem + "_times.txt")
+    atomic_write_text(times_file, format_times(times))
+    return times_file
+
+
 def path_length_m(path: np.ndarray) -> float:
     """Length of a polyline (N, 3), m."""
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
-__all__ = ["MeshWorld", "SceneWorld", "build_scene_world", "export_scene", "jsonable", "load_mesh_world",
-           "path_length_m", "world_of_scene"]
+__all__ = ["MeshWorld", "SceneWorld", "build_scene_world", "export_scene", "export_trajectory", "jsonable",
+           "load_mesh_world", "path_length_m", "world_of_scene"]

@@ -29,15 +29,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    from . import demo, evaluate, experiment, export, odometry, scenes, sensors, simulate, sweep
+    from . import bench, demo, evaluate, experiment, export, odometry, scenes, sensors, simulate, sweep
 
-    for module in (simulate, odometry, sensors, demo, evaluate, scenes, experiment, sweep, export):
+    for module in (simulate, odometry, sensors, demo, evaluate, scenes, experiment, sweep, bench, export):
         module.add_commands(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # the command as typed (recorded by some commands)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",

@@ -12,7 +12,8 @@ def add_commands(sub) -> None:
         "odometry",
         help="run BL / NCF / SALO odometry (scan-to-scan or scan-to-map) over a sequence folder",
         description="ICP odometry (the SALO paper's Alg. 1, scan-to-scan, or against a local map) over a "
-        "simulated sequence, a real KITTI sequence, a folder of .bin/.ply scans or a ROS 2 bag. Writes KITTI "
+        "simulated sequence, a real KITTI sequence (sensor hdl64e unless --sensor), a folder of .bin/.ply or "
+        ".pcd scans (salo export writes both) or a ROS 2 bag. Writes KITTI "
         "poses (lidar frame, first = identity), optionally TUM, and a per-frame diagnostics CSV; prints the "
         "degenerate stretches and their direction. --keys lists the parameters (of --config and --set).",
     )
@@ -26,7 +27,8 @@ def add_commands(sub) -> None:
     p.add_argument("--variant", default=DEFAULT_VARIANT, choices=list(VARIANTS),
                    help=f"method (default {DEFAULT_VARIANT}: chosen on the generalisation suite's tuning seeds; "
                    "bl, ncf, salo: the paper's scan-to-scan variants; -map: against a local map)")
-    p.add_argument("--sensor", help="preset or YAML (default: the folder's sensor.yaml)")
+    p.add_argument("--sensor", help="preset or YAML (default: the folder's sensor.yaml; hdl64e for a KITTI folder "
+                   "without one)")
     p.add_argument("--config", type=Path, help="YAML with odometry parameters overriding the variant's")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override one parameter (repeatable), a dotted key: e.g. --set filter.voxel_size_m=0.4, "
@@ -75,6 +77,10 @@ def cmd_odometry(args) -> int:
     except ConfigError as exc:
         raise CommandError(str(exc)) from None
     seq = open_sequence(args.sequence, sensor=args.sensor, poses=args.poses, topic=args.topic)
+    if seq.kind == "kitti" and args.sensor is None and not (args.sequence / "sensor.yaml").is_file():
+        from simlidar.formats.scan_folders import KITTI_SENSOR
+
+        print(f"sensor: {KITTI_SENSOR} (KITTI's; --sensor to change)")
     frames = parse_frames(args.frames)
     out = args.out or Path("out") / args.sequence.resolve().name / config.name / "poses.txt"
     files = RunFiles.beside(out, tum=args.tum)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from paramspec import help_text
 
-from .common import CommandError, parse_overrides, split_seed, whole_number
+from .common import CommandError, parse_overrides, real_number, split_seed, whole_number
 
 
 def _out(text: str) -> None:
@@ -43,7 +43,12 @@ def add_commands(subparsers) -> None:
     p.add_argument("name", help="scene name (see `salo scenes`)")
     _add_param_args(p)
     p.add_argument("--out", type=Path, required=True, help="output mesh file, .ply or .glb")
-    p.add_argument("--path-out", type=Path, help="also write the drivable path as x y z lines")
+    p.add_argument("--path-out", type=Path, metavar="POSES.txt",
+                   help="also write the scene's lidar trajectory as KITTI poses in the mesh's frame, one every "
+                   "--path-period s, and their times beside it (POSES_times.txt): the --poses and --times of "
+                   "`salo simulate --mesh`")
+    p.add_argument("--path-period", type=real_number(0.0, above=True), default=0.1, metavar="S",
+                   help="spacing of the --path-out poses, s (default 0.1: one sweep at 10 Hz)")
     p.set_defaults(func=cmd_scene)
 
     p = subparsers.add_parser("view", help="picture of a scene or a simulated sequence (PNG)",
@@ -101,20 +106,21 @@ def _scene_from_args(name: str, args):
 
 
 def cmd_scene(args) -> int:
-    import numpy as np
-
-    from tools.worlds import export_scene, path_length_m
+    from tools.worlds import export_scene, export_trajectory, path_length_m
 
     scene = _scene_from_args(args.name, args)
     try:
         export_scene(scene, args.out)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
-    if args.path_out is not None:
-        np.savetxt(args.path_out, scene.path, fmt="%.4f")
     _out(f"{scene.name} seed {scene.params['seed']}: {scene.n_triangles} triangles, "
          f"{len(scene.object_labels)} objects, path {path_length_m(scene.path):.0f} m, "
          f"trajectory {scene.trajectory.duration_s:.1f} s -> {args.out}")
+    if args.path_out is not None:
+        times_file = export_trajectory(scene.trajectory, args.path_out, args.path_period)
+        _out(f"trajectory as KITTI poses every {args.path_period:g} s -> {args.path_out} (times: {times_file}); "
+             f"simulate it with: salo simulate --mesh {args.out} --poses {args.path_out} --times {times_file} "
+             "--out SEQ")
     return 0
 
 

@@ -150,7 +150,23 @@ def _simulate_mesh(args, sensor) -> int:
                           on_frame=on_frame, strict_inside=True if args.strict_inside_check else None,
                           compress_truth=args.compress_truth)
     print(f"wrote {frames} frames to {args.out}")
+    _print_weak_frames(args.out)
     return 0
+
+
+def _print_weak_frames(out: Path) -> None:
+    """The frame ranges the truth finds weakly constrained, with their direction (``degeneracy.csv``)."""
+    from tools.degenerate import TRUTH_THRESHOLD, describe_stretches, truth_constraints
+
+    stretches = truth_constraints(out).stretches()
+    if not stretches:
+        print(f"no weakly constrained frame (smallest translational eigenvalue per return >= {TRUTH_THRESHOLD:g} "
+              "everywhere, from the true normals)")
+        return
+    print(f"weakly constrained frames (smallest translational eigenvalue per return < {TRUTH_THRESHOLD:g}, "
+          f"from the true normals; {out / 'degeneracy.csv'}):")
+    for line in describe_stretches(stretches):
+        print(line)
 
 
 def _simulate_scene(args, sensor) -> int:
@@ -180,6 +196,7 @@ def _simulate_scene(args, sensor) -> int:
                        motion_distortion=args.motion_distortion, info=info, force=args.force,
                        on_frame=on_frame, compress_truth=args.compress_truth)
     print(f"wrote {frames} frames to {args.out}")
+    _print_weak_frames(args.out)
     return 0
 
 

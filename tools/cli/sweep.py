@@ -71,20 +71,38 @@ def add_commands(subparsers) -> None:
 
     p = subparsers.add_parser(
         "regress",
-        help="CI regression: a small suite's errors against a committed baseline",
-        description="Run a small fixed suite (short sequences in city, forest and highway x every variant) "
-        "and compare each run's error figures with a baseline file. Fails (exit 1), naming the run, the "
-        "figure and both values, when a figure grows past baseline + max(relative x baseline, floor); the "
-        "tolerance is stored in the baseline file. --update rewrites the baseline from this run. With "
-        "--odometry-command, your own odometry is evaluated instead: a shell command with {sequence} "
-        "(a sequence folder: velodyne/*.bin, times.txt, sensor.yaml, ...) and {out} (the KITTI poses file "
-        "it must write, one line per frame), against your own --baseline.",
+        help="CI regression: a suite's errors against a committed baseline, ours or per method",
+        description="Run a small fixed suite (short sequences in city, forest and highway) and compare each "
+        "run's error figures with a baseline file. Fails (exit 1), naming the run, the figure and both values, "
+        "when a figure grows past baseline + max(relative x baseline, floor); the tolerance is stored in the "
+        "baseline file. --update writes the baseline from this run. Without --method: this project's variants "
+        "against tools/regress_baseline.json. With --method NAME (repeatable): each method against a baseline "
+        "of its own, DIR/SUITE/NAME.json (--baseline-dir; --baseline FILE for one method). A method is one of "
+        "ours (bl, ncf, salo, bl-map, ncf-map, salo-map, default; --set changes them), a peer (kiss-icp, "
+        "genz-icp, small-gicp), an installed plug-in (entry-point group salo.methods), or your program: "
+        "--odometry-command with {scans} (the folder of .bin scans), {sensor} (sensor.yaml), {times} "
+        "(times.txt), {fields} (per-point fields, --fields), {sequence} (the folder of all four) and {out} "
+        "(the KITTI poses file to write). Every method gets a copy of the sensor data only: the ground "
+        "truth is not in the folder it is handed.",
     )
-    p.add_argument("--baseline", type=Path, help="baseline JSON (default: the project's tools/regress_baseline.json)")
-    p.add_argument("--update", action="store_true", help="rewrite the baseline from this run's figures")
+    p.add_argument("--method", action="append", default=[], metavar="NAME",
+                   help="guard this method against its own baseline (repeatable); with --odometry-command, the "
+                   "name of your program's method")
+    p.add_argument("--name", dest="method", action="append", help=argparse.SUPPRESS)  # the old flag of --method
     p.add_argument("--odometry-command", metavar="CMD",
-                   help='external odometry, e.g. "my_odometry {sequence} {out}" (run through the shell)')
-    p.add_argument("--name", default="external", help="variant name of --odometry-command (default external)")
+                   help='your odometry, e.g. "my_odometry {scans} {sensor} {out}" (run through the shell); '
+                   "needs --method NAME")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="change our configurations' parameters (with --method; dotted keys, `salo odometry --keys`)")
+    p.add_argument("--fields", metavar="F,G",
+                   help="per-point fields the methods are handed: of ring, time_s, azimuth_index, range_m, or "
+                   "none (default: the suite's, ring,time_s)")
+    p.add_argument("--baseline", type=Path,
+                   help="baseline JSON (default: tools/regress_baseline.json; with --method, "
+                   "BASELINE_DIR/SUITE/METHOD.json)")
+    p.add_argument("--baseline-dir", type=Path, default=Path("regress-baselines"),
+                   help="folder of the per-method baselines (default regress-baselines)")
+    p.add_argument("--update", action="store_true", help="write the baseline(s) from this run's figures")
     p.add_argument("--suite", type=Path, metavar="SPEC.yaml", help="a sweep spec to use as the suite instead")
     p.add_argument("--out", type=Path, default=Path("out/regress"), help="output folder (default out/regress)")
     p.add_argument("--keep-sequences", action="store_true",
@@ -180,18 +198,59 @@ def cmd_sweep(args) -> int:
 def cmd_regress(args) -> int:
     from dataclasses import replace
 
+    from tools.methods import MethodError, check_command
+    from tools.staging import StagingError, parse_fields
     from tools.sweep import SpecError, load_spec
-    from tools.sweep.regress import DEFAULT_BASELINE, BaselineError, check_suite, read_baseline, regress, suite_spec
+    from tools.sweep.regress import (
+        DEFAULT_BASELINE,
+        BaselineError,
+        check_suite,
+        method_baseline_path,
+        method_suite_spec,
+        read_baseline,
+        regress,
+        regress_methods,
+        suite_spec,
+    )
 
-    if args.odometry_command and args.baseline is None:
-        raise CommandError("--odometry-command needs --baseline FILE: your odometry's own baseline "
-                           "(write it once with --update)")
-    baseline_path = args.baseline or DEFAULT_BASELINE
+    from .common import parse_config_set
+
+    methods = list(dict.fromkeys(args.method))
+    if args.odometry_command is not None:
+        if len(methods) != 1:
+            raise CommandError("--odometry-command needs one --method NAME: the name your method's baseline is "
+                               f"kept under ({len(methods)} given)")
+        try:
+            check_command(args.odometry_command, "--odometry-command")
+        except MethodError as exc:
+            raise CommandError(str(exc)) from None
+    if not methods and (args.set or args.fields):
+        raise CommandError(f"{'--set' if args.set else '--fields'} applies to --method runs (this project's own "
+                           "suite runs as its baseline was written)")
+    if args.baseline is not None and len(methods) > 1:
+        raise CommandError("--baseline names one method's file; with several --method, use --baseline-dir")
     try:
         suite = load_spec(args.suite) if args.suite else None
-        spec = suite_spec(args.odometry_command, suite, variant_name=args.name)
+        if methods:
+            commands = {methods[0]: args.odometry_command} if args.odometry_command else {}
+            fields = parse_fields(args.fields) if args.fields is not None else None
+            spec = method_suite_spec(methods, suite, commands, parse_config_set(args.set), fields)
+        else:
+            spec = suite_spec(suite)
         if args.keep_sequences:
             spec = replace(spec, keep_sequences=True, sequences="disk")
+        if methods:
+            baselines = {m: args.baseline or method_baseline_path(m, spec.name, args.baseline_dir) for m in methods}
+            documents = {}
+            if not args.update:
+                for m, path in baselines.items():  # fail before the work: missing, of another method or suite
+                    documents[m] = read_baseline(path, m)
+                    check_suite(documents[m], spec, str(path), m)
+            with _sweeping(args, "regress") as (executor, callbacks):
+                done = regress_methods(spec, args.out, executor, baselines, update=args.update,
+                                       documents=documents, command_timeout_s=args.timeout, **callbacks)
+            return _report_methods(done, baselines, args)
+        baseline_path = args.baseline or DEFAULT_BASELINE
         baseline = None
         if not args.update:
             baseline = read_baseline(baseline_path)  # fail before the work: missing, or for another suite
@@ -199,15 +258,36 @@ def cmd_regress(args) -> int:
         with _sweeping(args, "regress") as (executor, callbacks):
             done = regress(spec, args.out, executor, baseline_path, update=args.update, baseline=baseline,
                            command_timeout_s=args.timeout, **callbacks)
-    except (SpecError, BaselineError) as exc:
+    except (SpecError, BaselineError, MethodError, StagingError) as exc:
         raise CommandError(str(exc)) from None
-    rows, result, report = done.result.rows, done.result, done.report
     print()
     if args.update:
-        _print_figures(rows, None, done.tolerance)
-        print(f"\nwrote the baseline {baseline_path}: {len(rows)} runs ({result.seconds:.0f} s)")
+        _print_figures(done.result.rows, None, done.tolerance)
+        print(f"\nwrote the baseline {baseline_path}: {len(done.result.rows)} runs ({done.result.seconds:.0f} s)")
         return 0
+    return 0 if _print_report(done.result.rows, baseline, done.report, str(baseline_path), done.result.seconds,
+                              args.out) else 1
+
+
+def _report_methods(done, baselines: dict, args) -> int:
+    """Print each method's comparison (or the baselines written); the exit status."""
+    ok = True
+    for method, path in baselines.items():
+        rows = [r for r in done.result.rows if r["variant"] == method]
+        print(f"\n== method {method} (baseline {path})")
+        if args.update:
+            _print_figures(rows, None, done.tolerances[method])
+            print(f"wrote the baseline {path}: {len(rows)} runs")
+            continue
+        report = done.reports[method]
+        ok &= _print_report(rows, report.baseline, report, str(path), done.result.seconds, args.out, method)
+    return 0 if ok else 1
+
+
+def _print_report(rows, baseline, report, baseline_name: str, seconds: float, out, method: str | None = None) -> bool:
+    """Print the figures and the verdict of one comparison; True when it passed."""
     _print_figures(rows, baseline, report.tolerance)
+    what = f"regress {method}" if method else "regress"
     improved = [f for f in report.findings if f.kind == "improved"]
     if improved:
         print(f"\nimproved beyond the tolerance ({len(improved)}; consider `salo regress --update`):")
@@ -215,14 +295,14 @@ def cmd_regress(args) -> int:
             print(f"  {f.message()}")
     figures = len(report.tolerance.floors)
     if report.passed:
-        print(f"\nregress PASSED: {len(rows)} runs x {figures} figures within tolerance of {baseline_path} "
-              f"({result.seconds:.0f} s)")
-        return 0
-    print(f"\nregress FAILED against {baseline_path} ({len(report.failures)} problems):")
+        print(f"\n{what} PASSED: {len(rows)} runs x {figures} figures within tolerance of {baseline_name} "
+              f"({seconds:.0f} s)")
+        return True
+    print(f"\n{what} FAILED against {baseline_name} ({len(report.failures)} problems):")
     for f in report.failures:
         print(f"  {f.message()}")
-    print(f"(tolerance: baseline + max({report.tolerance.relative:.0%} of it, floor); run folders in {args.out}/runs)")
-    return 1
+    print(f"(tolerance: baseline + max({report.tolerance.relative:.0%} of it, floor); run folders in {out}/runs)")
+    return False
 
 
 def _print_figures(rows, baseline, tolerance) -> None:

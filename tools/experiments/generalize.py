@@ -112,11 +112,10 @@ def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[
     return out
 
 
-def simulate(seq: SuiteSequence, progress=None):
-    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
+def _prepare(seq: SuiteSequence):
+    """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
     from scenes import build_scene
     from scenes.families import draw_family_params, family_scene
-    from simlidar.in_memory import simulate_in_memory
     from simlidar.sensor import load_sensor
     from tools.worlds import world_of_scene
 
@@ -132,16 +131,35 @@ def simulate(seq: SuiteSequence, progress=None):
     if seq.frames > available:
         raise ValueError(f"{seq.name}: the path has room for {available} sweeps after {start:.1f} s, "
                          f"not {seq.frames}")
-    return simulate_in_memory(world, scene.trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
+    return world, scene.trajectory, sensor, start
+
+
+def simulate(seq: SuiteSequence, progress=None):
+    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
+    from simlidar.in_memory import simulate_in_memory
+
+    world, trajectory, sensor, start = _prepare(seq)
+    return simulate_in_memory(world, trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
                               fields=seq.kind, name=seq.name, on_frame=progress)
+
+
+def simulate_to_folder(seq: SuiteSequence, out, force: bool = False):
+    """A suite sequence as a sequence folder (``simlidar.simulate.simulate_sequence``): the "real" kind
+    without motion distortion (its per-point fields are the staging's to leave out). Returns the path."""
+    from simlidar.simulate import simulate_sequence
+
+    world, trajectory, sensor, start = _prepare(seq)
+    return simulate_sequence(world, trajectory, sensor, out, frames=seq.frames, seed=seq.seed, t_start=start,
+                             motion_distortion=seq.kind == "simulated", force=force,
+                             info={"command": "bench", "suite_sequence": asdict(seq)})
 
 
 # ---------------------------------------------------------------- methods
 def odometry_config(method: str, overrides: dict):
     """The odometry config a method name stands for (``default``: what ``salo odometry`` uses)."""
-    from odometry.config import DEFAULT_VARIANT, variant
+    from tools.methods import our_config
 
-    return variant(DEFAULT_VARIANT if method == "default" else method).replace(**overrides)
+    return our_config(method).replace(**overrides)
 
 
 @dataclass
@@ -158,26 +176,31 @@ class MethodRun:
 
 
 def run_method(method: str, sequence, overrides: dict) -> MethodRun:
-    """Run ``method`` over every frame of ``sequence`` (a peer that is missing or fails: ``ok=False``)."""
-    from tools.runners import run_method as run_ours
+    """Run ``method`` over every frame of ``sequence`` (``tools.methods``; a peer that is missing or fails:
+    ``ok=False``)."""
+    from tools.methods import OursMethod, method_from_name, run_method_staged
 
-    from . import peer
+    m = method_from_name(method)
+    if isinstance(m, OursMethod):
+        m = OursMethod(method, odometry_config(method, overrides))
+    why = m.unavailable()
+    if why:
+        return MethodRun(method, False, why)
+    try:
+        out = run_method_staged(m, sequence)  # the sensor's view: no poses, no truth
+    except Exception as exc:  # noqa: BLE001 - a peer failing must not end the suite; the row says why
+        if isinstance(m, OursMethod):
+            raise
+        log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
+        return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
+    if not isinstance(m, OursMethod):
+        return MethodRun(method, True, out.note, out.poses, out.frames_per_second)
+    from tools.runners import FrameFlags
 
-    if method in PEER_METHODS:
-        why = peer.peer_unavailable_reason(method)
-        if why:
-            return MethodRun(method, False, why)
-        cfg = odometry_config("default", overrides)
-        try:
-            run = peer.run_peer(method, sequence, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
-        except Exception as exc:  # noqa: BLE001 - a peer failing must not end the suite; the row says why
-            log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
-            return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
-        return MethodRun(method, True, f"{method} {peer.peer_version(method)}", run.poses, run.frames_per_second)
-    ours = run_ours(sequence, odometry_config(method, overrides))
-    flags = {"extrapolated": ours.flags.extrapolated, "degenerate": ours.flags.degenerate,
-             "remapped_frames": ours.flags.remapped}
-    return MethodRun(method, True, ours.run.config.name, ours.poses, ours.frames_per_second, flags=flags)
+    counts = FrameFlags.of(out.diagnostics)
+    flags = {"extrapolated": counts.extrapolated, "degenerate": counts.degenerate,
+             "remapped_frames": counts.remapped}
+    return MethodRun(method, True, out.note, out.poses, out.frames_per_second, flags=flags)
 
 
 def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
@@ -347,9 +370,9 @@ def summarize(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
 
 
 def method_label(m: str) -> str:
-    return {"default": "default", "bl": "BL", "ncf": "NCF", "salo": "SALO", "bl-map": "BL map",
-            "ncf-map": "NCF map", "salo-map": "SALO map", "kiss-icp": "KISS-ICP", "genz-icp": "GenZ-ICP",
-            "small-gicp": "small_gicp s2m"}.get(m, m)
+    from tools.methods import method_label as label
+
+    return label(m)
 
 
 def table_markdown(rows: list[dict], methods: tuple[str, ...], figure: str = "t_err_pct", spec: str = ".2f") -> str:

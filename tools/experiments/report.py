@@ -177,9 +177,9 @@ h2 { border-bottom: 2px solid #888; margin-top: 2em; }
 """
 
 
-def report_html(results_dir: str | Path, out_file: str | Path) -> str:
-    base = Path(out_file).parent.resolve()
-    md = report_markdown(results_dir, out_file)
+def html_page(markdown: str, title: str, base: str | Path) -> str:
+    """A self-contained HTML page of ``markdown``: its PNG images (paths relative to ``base``) inlined."""
+    base = Path(base).resolve()
 
     def img(src: str, alt: str) -> str:
         p = (base / src).resolve()
@@ -188,9 +188,12 @@ def report_html(results_dir: str | Path, out_file: str | Path) -> str:
         data = base64.b64encode(p.read_bytes()).decode("ascii")
         return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
 
-    title = html.escape(f"salo report: {results_dir}")
-    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title>"
-            f"<style>{_STYLE}</style></head>\n<body>\n{markdown_to_html(md, img)}\n</body></html>\n")
+    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+            f"<style>{_STYLE}</style></head>\n<body>\n{markdown_to_html(markdown, img)}\n</body></html>\n")
+
+
+def report_html(results_dir: str | Path, out_file: str | Path) -> str:
+    return html_page(report_markdown(results_dir, out_file), f"salo report: {results_dir}", Path(out_file).parent)
 
 
 def write_report(results_dir: str | Path, out_file: str | Path, fmt: str = "html") -> Path:

@@ -29,9 +29,15 @@ with relative = 20 % and the floors of ``DEFAULT_FLOORS``. Why this tolerance:
 Figures that improve past the tolerance pass, with a note suggesting
 ``--update``. The baseline file (JSON) holds the suite, the tolerance and,
 per run label, the figures; ``--update`` rewrites it from the current results,
-keeping the tolerance. An external odometry (a command that reads a sequence
-folder and writes KITTI poses) is evaluated the same way against its own
-baseline file.
+keeping the tolerance.
+
+Any method (``tools.methods``: one of our configurations, a peer, a plug-in, an
+external command) is guarded the same way against a baseline of its own, one
+file per method and suite (``method_baseline_path``: ``DIR/SUITE/METHOD.json``):
+its document names the method, and a baseline of another method or suite is
+refused with the flag that fixes it (``--method NAME`` for a name, ``--suite`` for
+a suite), never with a rewrite. Every method runs on the staged input of
+``tools.staging``: scans, sensor, times and the opted-in fields, no ground truth.
 """
 
 from __future__ import annotations
@@ -64,7 +70,8 @@ SUITE = {
     "keep_sequences": False,
 }
 DEFAULT_BASELINE = Path(__file__).resolve().parents[1] / "regress_baseline.json"
-EXTERNAL_VARIANT = "external"
+# Where per-method baselines go by default, relative to the working folder (a user's repository).
+DEFAULT_BASELINE_DIR = Path("regress-baselines")
 
 # Figures guarded (all errors: smaller is better) and their absolute floors, in their own units.
 DEFAULT_RELATIVE = 0.20
@@ -83,16 +90,34 @@ class BaselineError(ValueError):
     """The baseline file is missing, unreadable, or for another suite; the message says which."""
 
 
-def suite_spec(odometry_command: str | None = None, suite: SweepSpec | None = None,
-               variant_name: str = EXTERNAL_VARIANT) -> SweepSpec:
-    """The regression suite (or ``suite``); with ``odometry_command``, its only variant is that command."""
-    spec = suite or spec_from_dict(SUITE, origin="regression suite")
-    if odometry_command is None:
-        return spec
+def suite_spec(suite: SweepSpec | None = None) -> SweepSpec:
+    """The regression suite (or ``suite``), with its own variants."""
+    return suite or spec_from_dict(SUITE, origin="regression suite")
+
+
+def method_suite_spec(methods: list[str], suite: SweepSpec | None = None, commands: dict[str, str] | None = None,
+                      overrides: dict | None = None, fields: tuple[str, ...] | None = None) -> SweepSpec:
+    """The suite's sequences with ``methods`` as its variants.
+
+    methods: names of ``tools.methods`` (ours, including ``default``; peers; plug-ins) or keys of
+    ``commands`` (external commands; ``tools.methods.MethodError`` for an unknown name). overrides:
+    our configurations' changes, nested by stage (``--set``). fields: the per-point fields handed to
+    the methods (default: the suite's).
+    """
+    from tools.methods import method_from_name
+
+    commands = dict(commands or {})
+    for m in methods:
+        if m not in commands:
+            method_from_name(m)  # MethodError naming the known methods
+    spec = suite_spec(suite)
     data = spec.to_dict()
-    data.pop("configs")  # the built-in configs are not run against an external odometry
-    data.update(variants=[variant_name], commands={variant_name: odometry_command}, odometry={})
-    return spec_from_dict(data, origin="--odometry-command")
+    data.pop("configs")
+    configs = {m: {"base": DEFAULT_VARIANT} for m in methods if m == "default" and m not in commands}
+    data.update(variants=list(methods), commands=commands, configs=configs, odometry=dict(overrides or {}))
+    if fields is not None:
+        data["fields"] = list(fields) or ["none"]
+    return spec_from_dict(data, origin="--method")
 
 
 def _suite_identity(spec: SweepSpec) -> dict:
@@ -103,6 +128,20 @@ def _suite_identity(spec: SweepSpec) -> dict:
     data.pop("sequences", None)
     data.pop("commands")
     return json.loads(json.dumps(data))
+
+
+def _method_suite_identity(spec: SweepSpec) -> dict:
+    """What a method's baseline must match: the sequences and what the method is handed. Not the
+    method's own settings (commands, configs, overrides): changing them is what CI tests."""
+    data = _suite_identity(spec)
+    for key in ("variants", "configs", "odometry"):
+        data.pop(key)
+    return data
+
+
+def method_baseline_path(method: str, suite_name: str, folder: str | Path = DEFAULT_BASELINE_DIR) -> Path:
+    """A method's baseline file for a suite: ``folder/SUITE/METHOD.json``."""
+    return Path(folder) / suite_name / f"{method}.json"
 
 
 @dataclass(frozen=True)
@@ -175,12 +214,15 @@ class RegressReport:
 
 
 # ---------------------------------------------------------------- baseline file
-def read_baseline(path: str | Path) -> dict:
+def read_baseline(path: str | Path, method: str | None = None) -> dict:
+    """The baseline document at ``path`` (of ``method``, for the message when it is missing)."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
-        raise BaselineError(f"{path}: no baseline file; write one with `salo regress --update`") from None
+        what = f"salo regress --method {method} ... --update" if method else "salo regress --update"
+        raise BaselineError(f"{path}: no baseline file{f' for method {method!r}' if method else ''}; write it "
+                            f"once with `{what}` (and commit it)") from None
     except (OSError, json.JSONDecodeError) as exc:
         raise BaselineError(f"{path}: cannot read the baseline ({exc})") from None
     if not isinstance(data, dict) or not isinstance(data.get("runs"), dict):
@@ -188,16 +230,22 @@ def read_baseline(path: str | Path) -> dict:
     return data
 
 
-def baseline_from_rows(rows: list[dict], spec: SweepSpec, tolerance: Tolerance) -> dict:
-    """The baseline document for ``rows`` (every run must have succeeded)."""
+def baseline_from_rows(rows: list[dict], spec: SweepSpec, tolerance: Tolerance, method: str | None = None) -> dict:
+    """The baseline document for ``rows`` (every run must have succeeded); of one ``method``'s rows when given."""
     from .tasks import versions
 
-    failed = [r["label"] for r in rows if r["status"] != "ok"]
+    failed = [f"{r['label']} ({r['error']})" for r in rows if r["status"] != "ok"]
     if failed:
-        raise BaselineError(f"cannot write a baseline from failed runs: {', '.join(failed)}")
+        raise BaselineError(f"cannot write a baseline from failed runs: {'; '.join(failed)}")
+    doc = {"about": "salo regress baseline: figures per run of the suite; rewrite with `salo regress --update`"}
+    if method is not None:
+        doc = {"about": f"salo regress baseline of method {method}: figures per run of the suite; rewrite with "
+                        f"`salo regress --method {method} ... --update`", "method": method,
+               "suite": _method_suite_identity(spec)}
+    else:
+        doc["suite"] = _suite_identity(spec)
     return {
-        "about": "salo regress baseline: figures per run of the suite; rewrite with `salo regress --update`",
-        "suite": _suite_identity(spec),
+        **doc,
         "tolerance": tolerance.to_dict(),
         "versions": versions(),
         "runs": {r["label"]: {"key": r["key"], **{f: r[f] for f in tolerance.floors}} for r in rows},
@@ -209,16 +257,49 @@ def write_baseline(path: str | Path, document: dict) -> None:
 
 
 # ---------------------------------------------------------------- comparison
-def check_suite(baseline: dict, spec: SweepSpec, origin: str = "baseline") -> None:
-    """BaselineError unless ``baseline`` was written for this suite (checked before any work)."""
-    if baseline.get("suite") != _suite_identity(spec):
-        raise BaselineError(f"{origin}: written for another suite (scenes, frames, variants or parameters "
-                            "differ); rewrite it with `salo regress --update`")
+def _differences(a: dict, b: dict) -> list[str]:
+    """Top-level keys whose values differ, as 'KEY (BASELINE's vs this run's)'."""
+    return [f"{k} ({json.dumps(a.get(k))} there, {json.dumps(b.get(k))} here)" for k in sorted(set(a) | set(b))
+            if a.get(k) != b.get(k)]
 
 
-def compare(rows: list[dict], baseline: dict, spec: SweepSpec, origin: str = "baseline") -> RegressReport:
-    """Compare the suite's rows with a baseline document (``read_baseline``)."""
-    check_suite(baseline, spec, origin)
+def check_suite(baseline: dict, spec: SweepSpec, origin: str = "baseline", method: str | None = None) -> None:
+    """BaselineError unless ``baseline`` was written for this suite (and for ``method``, when given);
+    checked before any work. The message names what differs and the flag that fixes it."""
+    if method is not None:
+        written_for = baseline.get("method")
+        if written_for is None:
+            names = sorted({label.rsplit("/", 1)[-1] for label in baseline.get("runs", {})})
+            raise BaselineError(f"{origin}: a suite baseline of the variants {', '.join(names)}, not one method's; "
+                                f"give --baseline a file of method {method!r}'s own (or leave --baseline out: "
+                                f"{method_baseline_path(method, spec.name)})")
+        if written_for != method:
+            raise BaselineError(f"{origin}: the baseline of method {written_for!r}, and this run's method is "
+                                f"{method!r}: give --method {written_for} (the name it was written under), or "
+                                f"another --baseline for {method!r}")
+        here = _method_suite_identity(spec)
+    else:
+        if baseline.get("method") is not None:
+            raise BaselineError(f"{origin}: the baseline of method {baseline['method']!r}: give "
+                                f"--method {baseline['method']}")
+        here = _suite_identity(spec)
+    there = baseline.get("suite")
+    if there != here:
+        differ = _differences(there or {}, here)
+        what = "; ".join(differ) or "its suite is not recorded"
+        if method is None and differ and all(d.startswith(("variants", "configs")) for d in differ):
+            raise BaselineError(f"{origin}: written for other variants: {what}; a method of your own is guarded "
+                                "with --method NAME against a baseline of its own")
+        raise BaselineError(f"{origin}: written for another suite: {what}. Run the suite it was written for "
+                            f"(--suite); if the suite changed on purpose, write a new baseline with --update")
+
+
+def compare(rows: list[dict], baseline: dict, spec: SweepSpec, origin: str = "baseline",
+            method: str | None = None) -> RegressReport:
+    """Compare the suite's rows (of ``method``, when given) with a baseline document (``read_baseline``)."""
+    check_suite(baseline, spec, origin, method)
+    if method is not None:
+        rows = [r for r in rows if r["variant"] == method]
     tolerance = Tolerance.from_dict(baseline.get("tolerance", {}), origin)
     findings: list[Finding] = []
     base_runs = baseline["runs"]
@@ -226,7 +307,7 @@ def compare(rows: list[dict], baseline: dict, spec: SweepSpec, origin: str = "ba
         label = row["label"]
         if label not in base_runs:
             findings.append(Finding(label, "new", detail="no baseline figures for this run "
-                                                         "(rewrite the baseline with --update)"))
+                                                         "(a run the baseline's suite did not have)"))
             continue
         if row["status"] != "ok":
             findings.append(Finding(label, "failed", detail=f"the run failed: {row['error']}"))
@@ -250,8 +331,9 @@ def compare(rows: list[dict], baseline: dict, spec: SweepSpec, origin: str = "ba
     return RegressReport(rows, baseline, tolerance, findings)
 
 
-__all__ = ["DEFAULT_BASELINE", "SUITE", "BaselineError", "Finding", "RegressReport", "Tolerance", "baseline_from_rows",
-           "check_suite", "compare", "read_baseline", "suite_spec", "write_baseline"]
+__all__ = ["DEFAULT_BASELINE", "DEFAULT_BASELINE_DIR", "SUITE", "BaselineError", "Finding", "MethodsRegressRun",
+           "RegressReport", "Tolerance", "baseline_from_rows", "check_suite", "compare", "method_baseline_path",
+           "method_suite_spec", "read_baseline", "regress", "regress_methods", "suite_spec", "write_baseline"]
 
 
 # ---------------------------------------------------------------- the run
@@ -288,3 +370,46 @@ def regress(spec: SweepSpec, out: str | Path, executor, baseline_path: str | Pat
         return RegressRun(result, None, tolerance)
     report = compare(result.rows, baseline, spec, origin=str(baseline_path))
     return RegressRun(result, report, report.tolerance)
+
+
+@dataclass
+class MethodsRegressRun:
+    """A finished ``regress_methods``: the sweep, and per method its report (None when its baseline was
+    rewritten) and tolerance."""
+
+    result: SweepResult
+    reports: dict[str, RegressReport | None]
+    tolerances: dict[str, Tolerance]
+
+
+def regress_methods(spec: SweepSpec, out: str | Path, executor, baselines: dict[str, Path], *, update: bool = False,
+                    documents: dict[str, dict] | None = None, on_plan=None, on_result=None,
+                    command_timeout_s: float | None = None) -> MethodsRegressRun:
+    """Run the suite ``spec`` (``method_suite_spec``) and compare each method with its own baseline.
+
+    baselines: method -> its baseline file. documents: the baselines, already read and checked
+    (``read_baseline``, ``check_suite(..., method=)``; read here when missing). With ``update``
+    each method's file is rewritten from this run, keeping its tolerance.
+    """
+    documents = dict(documents or {})
+    if not update:
+        for method, path in baselines.items():
+            if method not in documents:
+                documents[method] = read_baseline(path, method)
+                check_suite(documents[method], spec, str(path), method)
+    result = run_sweep(spec, out, executor, rerun=True, retry_failed=True, on_plan=on_plan, on_result=on_result,
+                       command_timeout_s=command_timeout_s, report=False)
+    reports: dict[str, RegressReport | None] = {}
+    tolerances: dict[str, Tolerance] = {}
+    for method, path in baselines.items():
+        if update:
+            old = read_baseline(path) if Path(path).is_file() else {}
+            tolerance = Tolerance.from_dict(old["tolerance"], str(path)) if "tolerance" in old else Tolerance()
+            rows = [r for r in result.rows if r["variant"] == method]
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            write_baseline(path, baseline_from_rows(rows, spec, tolerance, method))
+            reports[method], tolerances[method] = None, tolerance
+        else:
+            report = compare(result.rows, documents[method], spec, str(path), method)
+            reports[method], tolerances[method] = report, report.tolerance
+    return MethodsRegressRun(result, reports, tolerances)

@@ -161,7 +161,7 @@ def _sim_jobs(plan: SweepPlan, store: Store, in_memory: bool = False) -> list[Si
 def _run_job(run: RunParams, store: Store, command_timeout_s: float | None) -> RunJob:
     extra = {"command_timeout_s": command_timeout_s} if command_timeout_s is not None else {}
     return RunJob(str(store.root), run.key, run.sim_key, run.describe(), run.config, run.command,
-                  workdir=os.getcwd(), **extra)
+                  workdir=os.getcwd(), method=run.method, fields=run.fields, **extra)
 
 
 __all__ = ["SweepPlan", "SweepResult", "plan_sweep", "run_sweep"]

@@ -15,7 +15,13 @@ their cross product, one run per combination. Every axis is optional::
     scene_params: {city: {route_blocks: 4}}
     odometry: {filter: {voxel_size_m: 0.5}}   # overrides for every built-in variant (odometry.config's keys)
     configs: {salo-v04: {base: salo, filter: {voxel_size_m: 0.4}}}   # extra named variants
-    commands: {mine: "my_odometry {sequence} {out}"}        # external odometries as variants
+    commands: {mine: "my_odometry {scans} {sensor} {out}"}  # external odometries as variants (tools.methods)
+    fields: [ring, time_s]            # per-point fields handed to every method (default; [none]: x y z only)
+
+Variants name our configurations, ``configs``, ``commands``, or any other method
+``tools.methods`` knows: a peer (``kiss-icp``, ``genz-icp``, ``small-gicp``) or an
+installed plug-in (entry-point group ``salo.methods``). Every method runs on a
+staged copy of the sequence without its ground truth (``tools.staging``).
 
 A run's key is a stable hash of its *resolved* parameters (the scene's full
 parameter set, the sensor's full model, the odometry's full config or the
@@ -39,6 +45,7 @@ from paramspec import ParamError, Params, differences, param, schema
 from simlidar.formats.salo import FORMAT_VERSION
 from simlidar.sensor import LidarModel, SensorError, load_sensor
 from simlidar.yaml_file import read_yaml
+from tools.staging import DEFAULT_FIELDS, SENSOR_FIELDS, StagingError, check_fields
 
 DEFAULT_SCENES = ("city",)
 DEFAULT_SEEDS = (0,)
@@ -46,9 +53,6 @@ DEFAULT_SENSORS = ("salo32",)
 DEFAULT_VARIANTS = ("bl", "ncf", "salo")
 DEFAULT_FRAMES = 100
 KEY_LENGTH = 16  # hex digits of sha256: 64 bits, no collision in any sweep a person runs
-
-# Placeholders an external odometry command must contain.
-COMMAND_FIELDS = ("{sequence}", "{out}")
 
 
 class SpecError(ParamError):
@@ -102,12 +106,15 @@ class SimParams:
 
 @dataclass(frozen=True)
 class RunParams:
-    """One run: a simulated sequence and one odometry (a built-in config or an external command)."""
+    """One run: a simulated sequence and one odometry (a built-in config, an external command, or a
+    named method of ``tools.methods``: a peer or a plug-in), handed the per-point ``fields``."""
 
     sim: SimParams
     variant: str
     config: OdometryConfig | None
     command: str | None = None
+    method: str | None = None
+    fields: tuple[str, ...] = DEFAULT_FIELDS
 
     @property
     def sim_key(self) -> str:
@@ -115,8 +122,16 @@ class RunParams:
 
     @property
     def key(self) -> str:
-        odometry = {"command": self.command} if self.command is not None else {"config": self.config.to_dict()}
-        return stable_hash({"sim": self.sim.key_data(), "variant": self.variant, **odometry})
+        if self.command is not None:
+            odometry = {"command": self.command}
+        elif self.method is not None:
+            from tools.methods import method_from_name
+
+            odometry = {"method": method_from_name(self.method).identity()}
+        else:
+            odometry = {"config": self.config.to_dict()}
+        return stable_hash({"sim": self.sim.key_data(), "variant": self.variant, "fields": list(self.fields),
+                            **odometry})
 
     @property
     def label(self) -> str:
@@ -139,8 +154,8 @@ class RunParams:
             "start_s": s.start_s,
             "motion_distortion": s.motion_distortion,
             "scene_params": json.dumps(s.scene_overrides, sort_keys=True),
-            "odometry": self.command if self.command is not None else json.dumps(
-                _config_changes(self.config), sort_keys=True),
+            "odometry": self.command if self.command is not None else self.method if self.method is not None
+            else json.dumps(_config_changes(self.config), sort_keys=True),
         }
 
 
@@ -148,6 +163,16 @@ def _config_changes(config: OdometryConfig) -> dict:
     """The dotted keys where ``config`` differs from its base variant (short, readable rows)."""
     base = VARIANTS.get(config.name)
     return config.to_dict() if base is None else differences(config, base)
+
+
+def _fields_problem(fields: tuple[str, ...]) -> str | None:
+    if fields == ("none",):
+        return None
+    try:
+        check_fields(fields)
+    except StagingError as exc:
+        return str(exc).removeprefix("fields: ")
+    return None
 
 
 def _sweep_name(name: str) -> str | None:
@@ -188,7 +213,11 @@ class SweepSpec(Params):
     scene_params: dict = param({}, "per scene, parameter overrides: {SCENE: {KEY: VALUE}} (`salo scenes NAME`)")
     odometry: dict = param({}, "odometry parameter overrides for every built-in variant")
     configs: dict = param({}, "extra variants: {NAME: {base: VARIANT, KEY: VALUE, ...}}")
-    commands: dict = param({}, "external odometries as variants: {NAME: \"command with {sequence} and {out}\"}")
+    commands: dict = param({}, "external odometries as variants: {NAME: \"command with {scans} (or {sequence}) "
+                           "and {out}\"}; also {sensor}, {times}, {fields}")
+    fields: tuple[str, ...] = param(DEFAULT_FIELDS, "per-point fields every method is handed (none: x y z "
+                                    f"intensity only; of {', '.join(SENSOR_FIELDS)})", one_or_more=True,
+                                    unique=True, check=_fields_problem)
     sequences: str = param("memory", "where a sequence lives while its runs use it: memory (each worker "
                            "simulates it, nothing is written but the runs' poses and metrics) or disk (the store's "
                            "sequences/ folder; a variant that is an external command always gets one)",
@@ -213,6 +242,7 @@ class SweepSpec(Params):
             "odometry": self.odometry,
             "configs": {k: v.to_dict() for k, v in self.configs.items()},
             "commands": self.commands,
+            "fields": list(self.fields) or ["none"],
             "sequences": self.sequences,
             "keep_sequences": self.keep_sequences,
         }
@@ -234,9 +264,11 @@ class SweepSpec(Params):
                                 self.start_s, self.motion_distortion)
                 for name in self.variants:
                     if name in self.commands:
-                        out.append(RunParams(sim, name, None, self.commands[name]))
-                    else:
-                        out.append(RunParams(sim, name, self._config(name)))
+                        out.append(RunParams(sim, name, None, self.commands[name], fields=self.fields))
+                    elif name in self.configs or name in VARIANTS:
+                        out.append(RunParams(sim, name, self._config(name), fields=self.fields))
+                    else:  # a peer or a plug-in (checked by spec_from_dict)
+                        out.append(RunParams(sim, name, None, method=name, fields=self.fields))
         return out
 
     def _config(self, name: str) -> OdometryConfig:
@@ -317,10 +349,13 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
     except ParamError as exc:
         raise exc.within("odometry").as_(SpecError).at(origin) from None
 
+    from tools.methods import command_problem, known_names
+
     for cname, template in v["commands"].items():
-        if not isinstance(template, str) or not all(f in template for f in COMMAND_FIELDS):
-            raise fail(f"commands.{cname}", f"must be a command line with {' and '.join(COMMAND_FIELDS)}, "
-                                            f"got {template!r}")
+        problem = command_problem(template)
+        if problem:
+            raise fail(f"commands.{cname}", problem)
+    v["fields"] = () if v["fields"] == ("none",) else tuple(v["fields"])
     configs = {}
     for cname, params in v["configs"].items():
         if params is not None and not isinstance(params, dict):
@@ -339,10 +374,12 @@ def spec_from_dict(data: Any, origin: str = "sweep spec", base_dir: str | Path |
                    f"names {sorted(clash)[0]!r}, which is already a variant")
     v["configs"] = configs
 
+    others = known_names()
+    named = [*others["peers"], *others["plug-ins"]]
     known = [*VARIANTS, *configs, *v["commands"]]
     for name in v["variants"]:
-        if name not in known:
-            raise fail("variants", f"names an unknown variant {name!r} (known: {', '.join(known)})")
+        if name not in known and name not in named:
+            raise fail("variants", f"names an unknown variant {name!r} (known: {', '.join(known + named)})")
     return SweepSpec(**v)
 
 

@@ -12,9 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import platform
-import shlex
 import socket
-import subprocess
 import time
 import traceback
 from dataclasses import dataclass
@@ -24,13 +22,14 @@ from pathlib import Path
 from odometry.config import OdometryConfig
 from simlidar.formats.atomic import atomic_write_text
 from simlidar.sensor import LidarModel
+from tools.methods import DEFAULT_COMMAND_TIMEOUT_S, MethodError
+from tools.staging import DEFAULT_FIELDS
 
 from .store import PARAMS_FILE, Store
 
 log = logging.getLogger(__name__)
 
 COMMAND_LOG = "command.log"
-DEFAULT_COMMAND_TIMEOUT_S = 3600.0
 
 
 @dataclass(frozen=True)
@@ -57,7 +56,8 @@ class SimJob:
 
 @dataclass(frozen=True)
 class RunJob:
-    """Run one odometry (a config, or an external command template) over a simulated sequence."""
+    """Run one odometry (a config, an external command template, or a named method of ``tools.methods``)
+    over a simulated sequence, staged with the per-point ``fields`` and no ground truth (``tools.staging``)."""
 
     store: str
     key: str
@@ -67,6 +67,8 @@ class RunJob:
     command: str | None = None
     command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
     workdir: str | None = None  # where an external command runs (the sweep's working folder)
+    method: str | None = None
+    fields: tuple[str, ...] = DEFAULT_FIELDS
 
 
 def versions() -> dict:
@@ -163,7 +165,8 @@ def run_task(job: RunJob, sim: dict) -> dict:
         run_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(run_dir / PARAMS_FILE, json.dumps(
             {"key": job.key, "sim_key": job.sim_key, "params": job.params, "sequence": sim["path"],
-             "config": None if job.config is None else job.config.to_dict(), "command": job.command},
+             "config": None if job.config is None else job.config.to_dict(), "command": job.command,
+             "method": job.method, "fields": list(job.fields)},
             indent=1, sort_keys=True) + "\n")
         if sim.get("in_memory") is not None:
             t0 = time.perf_counter()
@@ -176,8 +179,8 @@ def run_task(job: RunJob, sim: dict) -> dict:
         else:
             result = _run_and_evaluate(job, Path(sim["path"]), run_dir, timings)
     except Exception as exc:
-        error = str(exc) if isinstance(exc, _Failure) else _error_text(exc)
-        if not isinstance(exc, _Failure):
+        error = str(exc) if isinstance(exc, (_Failure, MethodError)) else _error_text(exc)
+        if not isinstance(exc, (_Failure, MethodError)):
             run_dir.mkdir(parents=True, exist_ok=True)
             atomic_write_text(run_dir / "error.txt", traceback.format_exc())
         result = failed_result(job, error, timings)
@@ -218,34 +221,40 @@ def memory_sequence(job: SimJob):
     return seq
 
 
+def job_method(job: RunJob):
+    """The ``tools.methods.Method`` a job runs."""
+    from tools.methods import CommandMethod, OursMethod, method_from_name
+
+    if job.command is not None:
+        return CommandMethod(job.params["variant"], job.command)
+    if job.method is not None:
+        return method_from_name(job.method)
+    return OursMethod(job.params["variant"], job.config)
+
+
 def _run_and_evaluate(job: RunJob, sequence, run_dir: Path, timings: dict) -> dict:
-    """Run and evaluate over ``sequence``: a folder, or a sequence in memory (our odometry only)."""
+    """Run the job's method on the sensor's view of ``sequence`` (a folder, or a sequence in memory) and
+    evaluate its poses against the truth, which the method never sees."""
     from simlidar.dataset import open_sequence
-    from simlidar.formats.kitti import read_kitti_poses
-    from tools.runners import RunFiles, evaluate_against_truth, run_method
+    from tools.methods import run_method_staged
+    from tools.runners import FrameFlags, RunFiles, evaluate_against_truth, write_run_files
 
     sequence_dir = Path(sequence) if isinstance(sequence, (str, Path)) else None
     seq = open_sequence(sequence_dir) if sequence_dir is not None else sequence
-    poses_path = run_dir / "poses.txt"
+    method = job_method(job)
+    out = run_method_staged(method, seq, fields=job.fields, workdir=job.workdir, log_path=run_dir / COMMAND_LOG,
+                            timeout_s=job.command_timeout_s)
+    files = RunFiles.in_folder(run_dir)
+    write_run_files(files, out.poses, out.diagnostics, job.config)
     diagnostics = {}
-    if job.command is not None:
-        t0 = time.perf_counter()
-        run_external(job.command, sequence_dir, poses_path, run_dir / COMMAND_LOG, job.command_timeout_s,
-                     job.workdir)
-        T_est = read_kitti_poses(poses_path)
-        if len(T_est) != len(seq):
-            raise _Failure(f"external odometry wrote {len(T_est)} poses to {poses_path}, the sequence has "
-                           f"{len(seq)} frames")
-        odometry_s = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        metrics = evaluate_against_truth(seq, T_est)
-        evaluate_s = time.perf_counter() - t0
-    else:
-        result = run_method(seq, job.config, files=RunFiles.in_folder(run_dir), evaluate=True)
-        T_est, metrics, odometry_s, evaluate_s = result.poses, result.metrics, result.run_s, result.evaluate_s
-        diagnostics = {"extrapolated_frames": result.flags.extrapolated, "degenerate_frames": result.flags.degenerate}
-    timings["odometry_s"] = odometry_s
-    timings["frames_per_s"] = len(T_est) / odometry_s if odometry_s > 0 else None
+    if out.diagnostics is not None:
+        flags = FrameFlags.of(out.diagnostics)
+        diagnostics = {"extrapolated_frames": flags.extrapolated, "degenerate_frames": flags.degenerate}
+    t0 = time.perf_counter()
+    metrics = evaluate_against_truth(seq, out.poses)
+    evaluate_s = time.perf_counter() - t0
+    timings["odometry_s"] = out.seconds
+    timings["frames_per_s"] = len(out.poses) / out.seconds if out.seconds > 0 else None
     timings["evaluate_s"] = evaluate_s
     metrics = metrics.to_dict()
     atomic_write_text(run_dir / "metrics.json", json.dumps(metrics, indent=1) + "\n")
@@ -254,34 +263,5 @@ def _run_and_evaluate(job: RunJob, sequence, run_dir: Path, timings: dict) -> di
             "host": socket.gethostname(), "finished_utc": _now_utc()}
 
 
-def run_external(template: str, sequence_dir: Path, poses_out: Path, log_path: Path,
-                 timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S, workdir: str | None = None) -> None:
-    """Run an external odometry: ``template`` with ``{sequence}`` and ``{out}`` filled in, through the shell.
-
-    The command reads the sequence folder and writes KITTI poses (one 3x4
-    row-major line per frame) to ``{out}``. Its stdout and stderr go to
-    ``log_path``. A non-zero exit, a timeout or no output file is a failure
-    whose message quotes the command's last lines.
-    """
-    command = template.replace("{sequence}", shlex.quote(str(sequence_dir))).replace(
-        "{out}", shlex.quote(str(poses_out)))
-    poses_out.unlink(missing_ok=True)
-    with open(log_path, "w") as log_file:
-        log_file.write(f"$ {command}\n")
-        log_file.flush()
-        try:
-            # The sweep's folder, so relative paths in the command work (a remote worker may not have it).
-            cwd = workdir if workdir is not None and Path(workdir).is_dir() else None
-            proc = subprocess.run(command, shell=True, cwd=cwd, stdout=log_file, stderr=subprocess.STDOUT,
-                                  timeout=timeout_s, stdin=subprocess.DEVNULL)
-        except subprocess.TimeoutExpired:
-            raise _Failure(f"external odometry timed out after {timeout_s:g} s: {command}") from None
-    if proc.returncode != 0:
-        tail = " | ".join(log_path.read_text().strip().splitlines()[-3:])
-        raise _Failure(f"external odometry exited with status {proc.returncode}: {tail}")
-    if not poses_out.is_file():
-        raise _Failure(f"external odometry wrote no poses to {poses_out} (command: {command})")
-
-
-__all__ = ["RunJob", "SimJob", "failed_result", "memory_sequence", "run_external", "run_task", "simulate_task",
+__all__ = ["RunJob", "SimJob", "failed_result", "job_method", "memory_sequence", "run_task", "simulate_task",
            "versions"]

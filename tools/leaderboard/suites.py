@@ -1,0 +1,115 @@
+"""The sequences a bench runs over: the regression suite, the generalisation suite, or a sweep spec.
+
+Each becomes a list of ``BenchSequence``: a simulated sequence folder under the
+bench's output folder (simulated once, reused by every later run), its scene
+family (the leaderboard's table groups by it), and the per-point fields its
+methods may see (the generalisation suite's "real" kind: none, as real KITTI).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+SUITES = ("regress", "generalize")
+
+
+class SuiteError(ValueError):
+    """A suite cannot be read or a sequence of it simulated; the message says which."""
+
+
+@dataclass(frozen=True)
+class BenchSequence:
+    """One sequence of a bench.
+
+    id: a folder-safe name, unique in the suite. family: the scene family (table group).
+    path: the simulated sequence folder. fields: per-point fields its methods may see
+    (None: the bench's own choice).
+    """
+
+    id: str
+    family: str
+    path: Path
+    fields: tuple[str, ...] | None = None
+
+    @property
+    def key(self) -> str:
+        """A hash of the sequence's manifest: a result is for this very sequence."""
+        return hashlib.sha256((self.path / "manifest.json").read_bytes()).hexdigest()[:16]
+
+
+def bench_sequences(suite: str | Path, out: str | Path, *, frames: int | None = None,
+                    families: tuple[str, ...] = (), on_sequence: Callable[[str], None] | None = None
+                    ) -> list[BenchSequence]:
+    """The suite's sequences under ``out``/sequences, simulating those not there yet.
+
+    suite: "regress" (``tools.sweep.regress.SUITE``), "generalize" (the evaluation split of
+    ``tools.experiments.generalize``; ``frames`` and ``families`` narrow it) or a sweep spec
+    YAML (its scenes x seeds x sensors x noise levels; its variants are not used).
+    on_sequence(id) before each simulation. Raises SuiteError.
+    """
+    out = Path(out)
+    if str(suite) == "generalize":
+        return _generalize(out, frames, families, on_sequence)
+    if families:
+        raise SuiteError("--families narrows the generalize suite only")
+    return _sweep(suite, out, frames, on_sequence)
+
+
+def _sweep(suite, out: Path, frames: int | None, on_sequence) -> list[BenchSequence]:
+    from dataclasses import replace
+
+    from tools.sweep import SpecError, Store, load_spec
+    from tools.sweep.regress import suite_spec
+    from tools.sweep.tasks import SimJob, simulate_task
+
+    try:
+        spec = suite_spec() if str(suite) == "regress" else load_spec(suite)
+    except SpecError as exc:
+        raise SuiteError(str(exc)) from None
+    if frames is not None:
+        spec = replace(spec, frames=frames)
+    store = Store(out.resolve())
+    sims = {}
+    for run in spec.runs():
+        sims.setdefault(run.sim_key, run.sim)
+    sequences = []
+    for key, sim in sims.items():
+        name = f"{sim.scene}-seed{sim.seed}-{Path(sim.sensor).stem}-noise{sim.noise_std_m:g}"
+        if not store.sequence_ready(key):
+            if on_sequence is not None:
+                on_sequence(name)
+            done = simulate_task(SimJob(str(store.root), key, sim.scene, sim.seed, sim.scene_overrides,
+                                        sim.sensor_model, sim.frames, sim.start_s, sim.motion_distortion))
+            if not done["ok"]:
+                raise SuiteError(f"{name}: {done['error']}")
+        sequences.append(BenchSequence(name, sim.scene, store.sequence_dir(key), spec.fields))
+    return sequences
+
+
+def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_sequence) -> list[BenchSequence]:
+    from tools.experiments.generalize import DEFAULT_FRAMES, GeneralizeParams, simulate_to_folder
+
+    try:
+        params = GeneralizeParams(frames=frames or DEFAULT_FRAMES, families=tuple(families))
+        seqs = params.sequences()
+    except ValueError as exc:
+        raise SuiteError(str(exc)) from None
+    sequences = []
+    for seq in seqs:
+        path = out / "sequences" / seq.name
+        if not (path / "manifest.json").is_file():
+            if on_sequence is not None:
+                on_sequence(seq.name)
+            try:
+                simulate_to_folder(seq, path, force=True)
+            except ValueError as exc:
+                raise SuiteError(f"{seq.name}: {exc}") from None
+        fields = None if seq.kind == "simulated" else ()
+        sequences.append(BenchSequence(seq.name, f"{seq.family} ({seq.kind})", path, fields))
+    return sequences
+
+
+__all__ = ["SUITES", "BenchSequence", "SuiteError", "bench_sequences"]

@@ -1,0 +1,207 @@
+"""What a method under test is handed: what a real sensor gives, and never the ground truth.
+
+A simulated sequence folder holds the truth beside the scans (``poses.txt``, the
+sidecar's true points and normals, ``degeneracy.csv``, the manifest). A method
+run by ``salo regress`` or ``salo bench`` gets a *staged* copy instead, a folder
+of its own outside the sequence's::
+
+    STAGE/input/                 {sequence}
+      velodyne/NNNNNN.bin        {scans}: float32 x y z intensity, as measured (hard links, else copies)
+      times.txt                  {times}: sweep start per frame, s
+      sensor.yaml                {sensor}: the sensor model
+      fields/NNNNNN.npy          per-point fields the run opts into (``SENSOR_FIELDS``), one array per scan
+    STAGE/output/poses.txt       {out}: where the method writes its KITTI poses
+
+No file there is a link to the sequence (hard links share the data, not the
+path; a symbolic link would lead back with ``..``), so ``cp {sequence}/poses.txt
+{out}`` finds nothing to copy. The per-point fields are what a lidar driver
+reports: ``ring``, ``time_s`` (s since the sweep start), ``azimuth_index``,
+``range_m``; the truth fields (``TRUTH_FIELDS``) are refused. A sequence simulated
+without motion distortion gets no ``time_s``: its scans are instantaneous, as a
+motion-compensated real scan is, and times would invite a de-skew that distorts them.
+
+``open_sequence(staged.root)`` reads the folder back (the ``scans`` reader, with
+its ``fields/``), so in-process methods read exactly what a command does. A
+sequence simulated into memory is handed to an in-process method as
+``sensor_view``: the same frames, fields and sensor, with the truth left out,
+so nothing is written to disk for it.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from simlidar.sequence import DatasetError
+
+# Per-point fields a lidar driver reports (the simulator's sidecar names).
+SENSOR_FIELDS = ("ring", "time_s", "azimuth_index", "range_m")
+# The default: what the Velodyne driver's XYZIRT cloud carries besides x y z intensity.
+DEFAULT_FIELDS = ("ring", "time_s")
+# The simulator's truth: never handed to a method.
+TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id")
+
+
+class StagingError(DatasetError):
+    """The input of a method cannot be staged (a truth field asked for, an unknown field, no sensor)."""
+
+
+def parse_fields(text: str | None) -> tuple[str, ...]:
+    """``--fields ring,time_s`` (or ``none``) -> the field names; StagingError naming a bad one."""
+    if text is None:
+        return DEFAULT_FIELDS
+    names = tuple(dict.fromkeys(t.strip() for t in text.split(",") if t.strip()))
+    if names in ((), ("none",)):
+        return ()
+    return check_fields(names, "--fields")
+
+
+def check_fields(names, origin: str = "fields") -> tuple[str, ...]:
+    """The field names, checked: sensor fields only (a truth field is refused with why)."""
+    names = tuple(names)
+    for name in names:
+        if name in TRUTH_FIELDS:
+            raise StagingError(f"{origin}: {name!r} is the simulator's ground truth, which a method under test "
+                               f"never sees (sensor fields: {', '.join(SENSOR_FIELDS)})")
+        if name not in SENSOR_FIELDS:
+            raise StagingError(f"{origin}: unknown per-point field {name!r} (sensor fields: "
+                               f"{', '.join(SENSOR_FIELDS)}, or none)")
+    return names
+
+
+@dataclass(frozen=True)
+class StagedInput:
+    """A staged input (see the module notes).
+
+    root: the input folder ({sequence}). out: the poses file the method writes ({out}).
+    fields: the per-point fields staged (possibly none). frames: scans staged.
+    """
+
+    root: Path
+    out: Path
+    fields: tuple[str, ...]
+    frames: int
+
+    @property
+    def scans(self) -> Path:
+        return self.root / "velodyne"
+
+    @property
+    def sensor(self) -> Path:
+        return self.root / "sensor.yaml"
+
+    @property
+    def times(self) -> Path:
+        return self.root / "times.txt"
+
+    def placeholders(self) -> dict[str, Path]:
+        """What an external command's placeholders stand for."""
+        return {"sequence": self.root, "scans": self.scans, "sensor": self.sensor, "times": self.times,
+                "fields": self.root / "fields", "out": self.out}
+
+
+def _place(src: Path, dst: Path) -> None:
+    """A hard link (same data, no path back), else a copy."""
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copyfile(src, dst)
+
+
+def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedInput:
+    """Write the sensor's view of ``sequence`` (an opened sequence) into ``folder``/input (see the module notes).
+
+    fields: per-point fields to hand over (``check_fields``); those the sequence lacks
+    are left out, and so is ``time_s`` of a sequence simulated without motion distortion.
+    Raises StagingError when the sequence has no sensor model.
+    """
+    from simlidar.formats.kitti import format_times, write_bin
+    from simlidar.sequence import sweep_start_times
+
+    fields = check_fields(fields)
+    if sequence.sensor is None:
+        raise StagingError(f"{sequence.path}: no sensor model to hand to the method (give the sequence a "
+                           "sensor.yaml)")
+    if (getattr(sequence, "manifest", None) or {}).get("motion_distortion") is False:
+        fields = tuple(f for f in fields if f != "time_s")
+    folder = Path(folder)
+    root, out_dir = folder / "input", folder / "output"
+    (root / "velodyne").mkdir(parents=True)
+    out_dir.mkdir()
+    scan_files = getattr(sequence, "scan_files", None)
+    staged_fields: set[str] = set()
+    for k in range(len(sequence)):
+        name = f"{k:06d}"
+        src = scan_files[k] if scan_files is not None else None
+        frame = sequence[k] if fields or src is None or src.suffix != ".bin" else None
+        if frame is None:
+            _place(src, root / "velodyne" / f"{name}.bin")
+        else:
+            intensity = frame.intensity if frame.intensity is not None else np.zeros(len(frame.points), np.float32)
+            if src is not None and src.suffix == ".bin":
+                _place(src, root / "velodyne" / f"{name}.bin")
+            else:
+                write_bin(root / "velodyne" / f"{name}.bin", frame.points, intensity)
+            have = [f for f in fields if frame.field(f) is not None]
+            if have:
+                (root / "fields").mkdir(exist_ok=True)
+                record = np.empty(len(frame.points), dtype=[(f, frame.field(f).dtype) for f in have])
+                for f in have:
+                    record[f] = frame.field(f)
+                np.save(root / "fields" / f"{name}.npy", record, allow_pickle=False)
+                staged_fields.update(have)
+    sensor_file = Path(sequence.path) / "sensor.yaml"
+    if sensor_file.is_file():
+        shutil.copyfile(sensor_file, root / "sensor.yaml")
+    else:
+        (root / "sensor.yaml").write_text(sequence.sensor.to_yaml())
+    (root / "times.txt").write_text(format_times(sweep_start_times(sequence)))
+    return StagedInput(root, out_dir / "poses.txt", tuple(f for f in fields if f in staged_fields), len(sequence))
+
+
+def sensor_view(sequence, fields=DEFAULT_FIELDS):
+    """What ``stage_input`` would hand over, kept in memory: an in-memory sequence
+    (``simlidar.in_memory.InMemorySequence``) without poses, truth figures or manifest,
+    its per-point fields cut to ``fields`` (less ``time_s`` without motion distortion).
+
+    Raises StagingError when the sequence has no sensor model.
+    """
+    from dataclasses import replace
+
+    fields = check_fields(fields)
+    if sequence.sensor is None:
+        raise StagingError(f"{sequence.path}: no sensor model to hand to the method")
+    if (getattr(sequence, "manifest", None) or {}).get("motion_distortion") is False:
+        fields = tuple(f for f in fields if f != "time_s")
+
+    def cut(record):
+        have = [f for f in fields if record is not None and record.dtype.names and f in record.dtype.names]
+        if not have:
+            return None
+        out = np.empty(len(record), dtype=[(f, record.dtype[f]) for f in have])
+        for f in have:
+            out[f] = record[f]
+        return out
+
+    return replace(sequence, fields=[cut(r) for r in sequence.fields], poses=None, degeneracy=[], manifest={})
+
+
+@contextmanager
+def staged(sequence, fields=DEFAULT_FIELDS, parent: str | Path | None = None) -> Iterator[StagedInput]:
+    """``stage_input`` into a fresh temporary folder (under ``parent``, default the system's), removed after."""
+    folder = Path(tempfile.mkdtemp(prefix="salo-input-", dir=parent))
+    try:
+        yield stage_input(sequence, folder, fields)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+__all__ = ["DEFAULT_FIELDS", "SENSOR_FIELDS", "TRUTH_FIELDS", "StagedInput", "StagingError", "check_fields",
+           "parse_fields", "sensor_view", "stage_input", "staged"]
