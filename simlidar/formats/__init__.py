@@ -3,6 +3,7 @@
 - ``atomic``: atomic file writes, checksums, and the staged folder every folder writer builds in;
 - ``kitti``: KITTI poses, times, calibration and ``.bin`` scans;
 - ``tum``: TUM trajectories (for evo);
+- ``number_lines``: the numbers-per-line text both pose formats are;
 - ``ply``, ``pcd``: point clouds with per-point fields;
 - ``points``: the per-point record the interchange formats carry (the Velodyne driver's layout plus truth);
 - ``scan_folders``: ``Sequence`` (frames read from scan files) and the readers of real KITTI and plain scan folders;

@@ -18,6 +18,7 @@ import numpy as np
 from .. import se3
 from ..sequence import DatasetError
 from .atomic import atomic_write_text
+from .number_lines import read_number_lines
 
 BIN_POINT_BYTES = 16  # float32 x y z intensity
 
@@ -26,29 +27,8 @@ BIN_POINT_BYTES = 16  # float32 x y z intensity
 def read_kitti_poses(path: str | Path) -> np.ndarray:
     """Read a KITTI pose file (12 numbers per line) -> (N, 4, 4)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise DatasetError(f"{path}: cannot read pose file ({exc.strerror})") from None
-    rows = []
-    for lineno, line in enumerate(text.splitlines(), 1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        parts = line.split()
-        if len(parts) != 12:
-            raise DatasetError(
-                f"{path}:{lineno}: a KITTI pose line needs 12 numbers (3x4 row-major), "
-                f"found {len(parts)}"
-            )
-        try:
-            rows.append([float(p) for p in parts])
-        except ValueError:
-            raise DatasetError(f"{path}:{lineno}: not a number in {line.strip()!r}") from None
-    if not rows:
-        raise DatasetError(f"{path}: no poses in the file")
-    poses = se3.kitti_lines_to_poses(np.array(rows))
-    if not np.all(np.isfinite(poses)):
-        raise DatasetError(f"{path}: poses contain non-finite numbers")
+    rows = read_number_lines(path, 12, "a KITTI pose line needs 12 numbers (3x4 row-major)", "pose file")
+    poses = se3.kitti_lines_to_poses(rows)
     R = poses[:, :3, :3]
     err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
     bad = np.flatnonzero(err > 1e-3)

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write_text
+from .number_lines import read_number_lines
 
 
 def format_tum(poses: np.ndarray, times_s: np.ndarray) -> str:
@@ -36,27 +37,7 @@ def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     from ..sequence import DatasetError
 
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise DatasetError(f"{path}: cannot read trajectory ({exc.strerror})") from None
-    rows = []
-    for lineno, line in enumerate(text.splitlines(), 1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        parts = line.split()
-        if len(parts) != 8:
-            raise DatasetError(f"{path}:{lineno}: a TUM line needs 8 numbers (time tx ty tz qx qy qz qw), "
-                               f"found {len(parts)}")
-        try:
-            rows.append([float(p) for p in parts])
-        except ValueError:
-            raise DatasetError(f"{path}:{lineno}: not a number in {line.strip()!r}") from None
-    if not rows:
-        raise DatasetError(f"{path}: no poses in the file")
-    data = np.array(rows)
-    if not np.all(np.isfinite(data)):
-        raise DatasetError(f"{path}: the trajectory holds non-finite numbers")
+    data = read_number_lines(path, 8, "a TUM line needs 8 numbers (time tx ty tz qx qy qz qw)", "trajectory")
     norms = np.linalg.norm(data[:, 4:8], axis=1)
     bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
     if len(bad):
