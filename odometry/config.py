@@ -83,7 +83,7 @@ class FilterParams(_Stage):
                                 "points", above=0.0)
     normal_neighbours: int = param(12, "k of the kNN normal estimation in the raw scan", min=3)
     adjacent_ring_reach_m: float | None = param(
-        None, "a kNN neighbourhood on one ring takes the nearer adjacent ring's points within this distance "
+        4.0, "a kNN neighbourhood on one ring takes the nearer adjacent ring's points within this distance "
         "instead of its farther half (odometry/scan_lines.py; needs the sensor); null: plain kNN (the paper)",
         above=0.0)
     max_curvature: float = param(0.05, "PCL curvature above which a point is discarded", min=0.0)
@@ -173,8 +173,8 @@ class DegeneracyParams(_Stage):
     section_name = "degeneracy"
     degenerate_eigenvalue: float = param(0.01, "flag a frame whose smallest translational eigenvalue of the "
                                          "information per match is below this", min=0.0)
-    min_constraint_eigenvalue: float = param(0.0, "a direction whose scaled information per match is below this "
-                                             "keeps the motion prior, and the NCF may not push one below it "
+    min_constraint_eigenvalue: float = param(0.01, "a direction whose scaled information per match is below "
+                                             "this keeps the motion prior, and the NCF may not push one below it "
                                              "(0: neither)", min=0.0)
     weak_direction_update: str = param("prior", "prior: a motion prior blends with the data in weak directions; "
                                        "remap: they get no update", choices=WEAK_UPDATES)

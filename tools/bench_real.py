@@ -2,6 +2,7 @@
 
     python -m tools.bench_real                       # our variants and the installed peers
     python -m tools.bench_real --methods bl,salo-map
+    python -m tools.bench_real --set filter.adjacent_ring_reach_m=2   # a change to every variant of ours
 
 The excerpts (KITTI 05 and 01, HDL-64E, 10 frames each; an HDL-32E scan pair) are
 too short for 100 m segments; as their README says, they are scored by the
@@ -19,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from odometry.config import DEFAULT_VARIANT, VARIANTS, variant
+from odometry.config import DEFAULT_VARIANT, VARIANTS, ConfigError, OdometryConfig, config_from_dict, variant
 from odometry.pipeline import run_sequence
+from paramspec import assignments
 from simlidar import se3
 from simlidar.dataset import open_sequence
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
@@ -45,7 +47,11 @@ def main() -> None:
     ap.add_argument("--methods", default=",".join([*VARIANTS, *PEERS]),
                     help=f"comma-separated variants and peers (default all; the default variant is {DEFAULT_VARIANT})")
     ap.add_argument("--root", type=Path, default=REAL_DATA, help=f"real-data folder (default {REAL_DATA})")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="an odometry parameter changed for our variants (dotted, e.g. ncf.max_normal_std_deg=3)")
     args = ap.parse_args()
+    changes = OdometryConfig.schema().read(assignments(args.set), "--set", coerce=True, partial=True,
+                                           error=ConfigError)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     print(f"{'excerpt':11s} {'method':20s} {'t, cm':>6s} {'r, deg':>7s}")
     for name, (folder, sensor, kitti) in EXCERPTS.items():
@@ -58,7 +64,8 @@ def main() -> None:
                     continue
                 poses = run_peer(m, seq).poses
             else:
-                cfg = variant(m).replace(clean={"kitti_vertical_correction_deg": 0.205 if kitti else 0.0})
+                cfg = config_from_dict(changes, base=variant(m), origin="--set").replace(
+                    clean={"kitti_vertical_correction_deg": 0.205 if kitti else 0.0})
                 poses = run_sequence(seq, cfg).poses
             t, r = pair_errors(seq.poses, poses)
             print(f"{name:11s} {m + (' (default)' if m == DEFAULT_VARIANT else ''):20s} {t:6.2f} {r:7.3f}")
