@@ -74,7 +74,8 @@ def widen_one_ring_neighbourhoods(
     idx = np.array(neighbour_indices, dtype=np.intp)
     m, k = idx.shape
     half = k // 2
-    own = np.asarray(rings)[idx]
+    rings = np.asarray(rings, dtype=np.int64)  # a driver's uint16 rings would wrap at ring - 1
+    own = rings[idx]
     one_ring = np.flatnonzero(np.all(own == own[:, :1], axis=1))
     widened = np.zeros(m, dtype=bool)
     if len(one_ring) == 0 or half == 0:

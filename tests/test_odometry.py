@@ -168,7 +168,9 @@ def test_no_vertical_drift_on_rolling_terrain(rolling_suburb):
     a normal cannot see; the matches on the ground are offset along the motion by the frame's travel, so
     the tilt turns into a pitch bias every frame. The default configuration takes its normals from a local
     map of many scans, only where a neighbourhood holds two scan lines: the height error at the end stays
-    below 0.35 % of the distance (0.21 % measured), scan-to-scan BL's is more than five times larger (3.6 %)."""
+    below 0.35 % of the distance (0.21 % measured), scan-to-scan BL's is more than five times larger (1.6 %).
+    Scan-to-scan, widening one-ring neighbourhoods with the adjacent ring (``filter.adjacent_ring_reach_m``,
+    the default) removes half of it: BL with the paper's plain kNN normals climbs 3.6 %."""
     from odometry.config import DEFAULT_VARIANT
 
     seq = rolling_suburb
@@ -176,11 +178,13 @@ def test_no_vertical_drift_on_rolling_terrain(rolling_suburb):
     dist = float(np.sum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1)))
     assert dist > 100 and np.ptp(gt[:, 2, 3]) > 1.0  # a real climb, not flat ground
 
-    def vertical_drift_pct(name):
-        poses = run_sequence(seq, variant(name)).poses
+    def vertical_drift_pct(config):
+        poses = run_sequence(seq, config).poses
         return 100 * abs(poses[-1, 2, 3] - gt[-1, 2, 3]) / dist
 
-    default = vertical_drift_pct(DEFAULT_VARIANT)
-    scan_to_scan = vertical_drift_pct("bl")
-    assert default < 0.35, (default, scan_to_scan)
-    assert scan_to_scan > 5 * default, (default, scan_to_scan)
+    default = vertical_drift_pct(variant(DEFAULT_VARIANT))
+    scan_to_scan = vertical_drift_pct(variant("bl"))
+    one_ring = vertical_drift_pct(variant("bl").replace(filter={"adjacent_ring_reach_m": None}))
+    assert default < 0.35, (default, scan_to_scan, one_ring)
+    assert scan_to_scan > 5 * default, (default, scan_to_scan, one_ring)
+    assert one_ring > 1.5 * scan_to_scan, (default, scan_to_scan, one_ring)

@@ -75,6 +75,16 @@ def test_one_ring_neighbourhoods_get_the_plane_normal():
     assert np.degrees(np.median(overall)) < 1.5
 
 
+def test_rings_as_a_driver_gives_them_uint16_widen_the_lowest_ring_too():
+    points, rings = ground_scan()
+    queries = points[rings == 0][::25]  # its one adjacent ring is above: ring - 1 must not wrap
+    idx = knn(points, queries, 12)
+    wide, widened = widen_one_ring_neighbourhoods(points, rings, queries, idx, RINGS, COLUMNS, 4.0)
+    same, _ = widen_one_ring_neighbourhoods(points, rings.astype(np.uint16), queries, idx, RINGS, COLUMNS, 4.0)
+    assert widened.any() and np.array_equal(same, wide)
+    assert np.all(rings[wide[widened][:, 6:]] == 1)
+
+
 def test_widening_keeps_two_ring_neighbourhoods_and_respects_the_distance():
     # a coarse azimuth step (1 deg): 3-4 m out, a ring's points are 5-7 cm apart and the next
     # ring 0.2 m away, so most kNN neighbourhoods already hold two rings
