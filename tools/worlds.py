@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from simlidar.sequence import DEFAULT_FRAME_PERIOD_S
+
 
 def jsonable(value: Any) -> Any:
     """Numpy scalars and arrays to plain Python, recursively (for manifests)."""
@@ -169,7 +171,7 @@ def export_scene(scene, out: Path) -> Path:
     return out
 
 
-def export_trajectory(trajectory, out: Path, period_s: float = 0.1) -> Path:
+def export_trajectory(trajectory, out: Path, period_s: float = DEFAULT_FRAME_PERIOD_S) -> Path:
     """Write a trajectory's lidar poses every ``period_s`` s as a KITTI pose file ``out`` (in the world's frame,
     as ``load_mesh_world`` reads them) and their times beside it, ``<stem>_times.txt``; returns the times file."""
     from simlidar.formats.atomic import atomic_write_text
