@@ -265,13 +265,16 @@ def neighbourhood_pca(
     neighbour_indices: np.ndarray,
     query_points: np.ndarray,
     viewpoint: np.ndarray | None = None,
+    neighbourhoods: np.ndarray | None = None,
 ) -> NormalEstimate:
     """``local_pca`` of the neighbourhoods ``cloud[neighbour_indices]`` (M, k, 3), keeping the indices.
 
     cloud: (N, 3) m; neighbour_indices: (M, k) rows of ``cloud``; query_points: (M, 3) m, to orient
-    the normals towards ``viewpoint`` (default: the origin).
+    the normals towards ``viewpoint`` (default: the origin). neighbourhoods: (M, k, 3)
+    ``cloud[neighbour_indices]`` when the caller has gathered them already (the NCF needs them too).
     """
-    est = local_pca(cloud[neighbour_indices], query_points=query_points, viewpoint=viewpoint)
+    hoods = cloud[neighbour_indices] if neighbourhoods is None else neighbourhoods
+    est = local_pca(hoods, query_points=query_points, viewpoint=viewpoint)
     return NormalEstimate(
         normals=est.normals,
         axes=est.axes,

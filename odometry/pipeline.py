@@ -192,7 +192,7 @@ def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
     ``raw``: every de-skewed raw point, normals estimated where matched.
     """
     if config.match.target == "filtered":
-        return Target(scan.points, cKDTree(scan.points), scan.normals)
+        return Target(scan.points, scan.tree_of_points(), scan.normals)
     raw, tree, k = scan.raw_points, scan.raw_tree, config.filter.normal_neighbours
 
     def normals_of(rows: np.ndarray) -> tuple[np.ndarray, None]:
@@ -485,6 +485,8 @@ class Odometry:
                 scan.raw_points, _ = redeskew(scan.raw_points, scan.raw_points, raw_times_s, T_guess, T, period)
                 scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
         st.target_scan = scan
+        if st.local_map is None and cfg.match.target == "filtered":
+            scan.start_points_tree()  # (built while the next scan is cleaned and filtered)
         st.target_frame = len(st.poses) - 1
         st.target_motion = T if redo else T_deskew
         if st.local_map is not None:
