@@ -223,7 +223,7 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
     if same:
         scan.centroids = scan.points
     elif scan.centroid_times_s is not None and len(scan.centroids):
-        scan.centroids, _ = redeskew(scan.centroids, scan.centroids, scan.centroid_times_s, old_motion, new_motion,
+        scan.centroids, _ = redeskew(scan.centroids, None, scan.centroid_times_s, old_motion, new_motion,
                                      period_s)
 
 
@@ -482,7 +482,7 @@ class Odometry:
         if redo:
             redeskew_scan(scan, T_deskew, T, period)
             if cfg.match.target == "raw":
-                scan.raw_points, _ = redeskew(scan.raw_points, scan.raw_points, raw_times_s, T_guess, T, period)
+                scan.raw_points, _ = redeskew(scan.raw_points, None, raw_times_s, T_guess, T, period)
                 scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
         st.target_scan = scan
         if st.local_map is None and cfg.match.target == "filtered":
