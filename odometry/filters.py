@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,7 +24,7 @@ from simlidar.sensor import LidarModel
 from .config import OdometryConfig
 from .constraints import restore_constraints
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
-from .normals import estimate_normals, neighbourhood_pca
+from .normals import knn, neighbourhood_pca
 from .scan_lines import widen_one_ring_neighbourhoods
 
 _background: dict[int, ThreadPoolExecutor] = {}
@@ -85,6 +85,8 @@ class FilteredScan:
     counts: points after each stage: raw, voxels, ncf, curvature, and "restored"
         (NCF-rejected points kept for a direction they alone constrain).
     seconds: time spent per stage.
+    points_tree: (the points it was started on, a future of the cKDTree over them), started on the
+        background thread when the scan becomes the next scan-to-scan target; None before.
     """
 
     points: np.ndarray
@@ -98,9 +100,20 @@ class FilteredScan:
     centroid_times_s: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
     seconds: dict = field(default_factory=dict)
+    points_tree: tuple[np.ndarray, Future] | None = None
 
     def __len__(self) -> int:
         return len(self.points)
+
+    def start_points_tree(self) -> None:
+        """Build the k-d tree over ``points`` on the background thread (``points_tree``)."""
+        self.points_tree = (self.points, background().submit(cKDTree, self.points))
+
+    def tree_of_points(self) -> cKDTree:
+        """The k-d tree over ``points``: the one started by ``start_points_tree`` unless they moved since."""
+        if self.points_tree is not None and self.points_tree[0] is self.points:
+            return self.points_tree[1].result()
+        return cKDTree(self.points)
 
 
 def ncf_noise_model(config: OdometryConfig, sensor_range_noise_std_m: float | None):
@@ -164,14 +177,14 @@ def filter_scan(
         empty = np.zeros((0, 3))
         return FilteredScan(empty, empty, None, None, np.zeros(0), raw_points, tree, centroids, centroid_times,
                             {**counts, "ncf": 0, "curvature": 0}, seconds)
-    est = estimate_normals(raw_points, k=k, query_points=centroids, tree=tree)
+    idx = knn(raw_points, centroids, k, tree=tree)
     reach = config.filter.adjacent_ring_reach_m
     if reach is not None and raw_rings is not None and sensor is not None:
-        idx, widened = widen_one_ring_neighbourhoods(raw_points, raw_rings, centroids, est.neighbour_indices,
-                                                     sensor.rings, sensor.columns_per_sweep, reach)
-        if widened.any():
-            est = neighbourhood_pca(raw_points, idx, centroids)
+        idx, widened = widen_one_ring_neighbourhoods(raw_points, raw_rings, centroids, idx, sensor.rings,
+                                                     sensor.columns_per_sweep, reach)
         counts["widened"] = int(widened.sum())
+    hoods = raw_points[idx]  # (V, k, 3): gathered once for the PCA and the NCF
+    est = neighbourhood_pca(raw_points, idx, centroids, neighbourhoods=hoods)
     seconds["normals"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -180,7 +193,7 @@ def filter_scan(
     if config.ncf.enabled and config.ncf.applies_to in ("scan", "both"):
         noise = ncf_noise_model(config, sensor.range_noise_std_m if sensor is not None else None)
         keep, cov = normal_covariance_filter(
-            raw_points[est.neighbour_indices], noise,
+            hoods, noise,
             c_tau_rad2=math.radians(config.ncf.max_normal_std_deg) ** 2, pca=est,
             noise_free_gaps=config.ncf.noise_free_gaps,
         )

@@ -17,6 +17,7 @@ from scipy.spatial import cKDTree
 
 from simlidar import se3
 
+from . import kdtree_query
 from .config import OdometryConfig
 from .constraints import restore_constraints, weakest_translation
 from .estimation import point_to_plane_step
@@ -120,7 +121,7 @@ def rejectors_for(config: OdometryConfig) -> list[Rejector]:
 
 def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
     """Nearest target point of each (N, 3) point within ``max_distance_m`` (k-d tree, all cores)."""
-    dist, idx = target.tree.query(points, k=1, workers=-1, distance_upper_bound=max_distance_m)
+    dist, idx = kdtree_query.query(target.tree, points, k=1, distance_upper_bound=max_distance_m)
     found = np.isfinite(dist)
     return Matches(np.flatnonzero(found), idx[found], dist[found])
 

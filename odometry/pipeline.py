@@ -130,11 +130,15 @@ def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray
     points: (N, 3) as measured, m; times_s, rings: (N,) or None. Counts go into ``diag``.
     """
     points = np.asarray(points, dtype=np.float64)
-    finite = np.all(np.isfinite(points), axis=1)
-    safe = np.where(finite[:, None], points, 0.0)
+    # (per column and np.compress: np.all(axis=1) and boolean row indexing of an (N, 3) array
+    # are several times slower, and this runs on every raw point)
+    finite_xyz = np.isfinite(points)
+    finite = finite_xyz[:, 0] & finite_xyz[:, 1] & finite_xyz[:, 2]
+    safe = points if finite.all() else np.where(finite[:, None], points, 0.0)
     r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
     keep = finite & (r >= config.clean.min_range_m) & (r <= config.clean.max_range_m)
-    out = CleanScan(points[keep], None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep],
+    out = CleanScan(np.compress(keep, points, axis=0),
+                    None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep],
                     None if rings is None else np.asarray(rings)[keep], np.flatnonzero(keep))
     if config.clean.kitti_vertical_correction_deg:
         out.points = correct_kitti_vertical_angle(out.points, config.clean.kitti_vertical_correction_deg)
@@ -188,7 +192,7 @@ def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
     ``raw``: every de-skewed raw point, normals estimated where matched.
     """
     if config.match.target == "filtered":
-        return Target(scan.points, cKDTree(scan.points), scan.normals)
+        return Target(scan.points, scan.tree_of_points(), scan.normals)
     raw, tree, k = scan.raw_points, scan.raw_tree, config.filter.normal_neighbours
 
     def normals_of(rows: np.ndarray) -> tuple[np.ndarray, None]:
@@ -219,7 +223,7 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
     if same:
         scan.centroids = scan.points
     elif scan.centroid_times_s is not None and len(scan.centroids):
-        scan.centroids, _ = redeskew(scan.centroids, scan.centroids, scan.centroid_times_s, old_motion, new_motion,
+        scan.centroids, _ = redeskew(scan.centroids, None, scan.centroid_times_s, old_motion, new_motion,
                                      period_s)
 
 
@@ -478,9 +482,11 @@ class Odometry:
         if redo:
             redeskew_scan(scan, T_deskew, T, period)
             if cfg.match.target == "raw":
-                scan.raw_points, _ = redeskew(scan.raw_points, scan.raw_points, raw_times_s, T_guess, T, period)
+                scan.raw_points, _ = redeskew(scan.raw_points, None, raw_times_s, T_guess, T, period)
                 scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
         st.target_scan = scan
+        if st.local_map is None and cfg.match.target == "filtered":
+            scan.start_points_tree()  # (built while the next scan is cleaned and filtered)
         st.target_frame = len(st.poses) - 1
         st.target_motion = T if redo else T_deskew
         if st.local_map is not None:

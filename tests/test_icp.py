@@ -7,7 +7,7 @@ import pytest
 from helpers import box_room, constant_velocity
 
 from odometry.config import BL, NCF, SALO, SALO_MAP, ConfigError, config_from_dict, load_config, variant
-from odometry.deskew import deskew, redeskew
+from odometry.deskew import deskew, redeskew, screw_apply
 from odometry.estimation import point_to_plane_step
 from odometry.filters import voxel_centroids
 from odometry.icp import Source, Target, converged, register
@@ -223,3 +223,18 @@ def test_every_match_target_tracks_a_known_motion(target):
         pose = pose @ step
     if target == "map":
         assert len(odo.state.local_map) > 0 and "plane" in odo.last.matches
+
+
+def test_redeskew_points_alone_match_points_with_normals():
+    """``redeskew`` without normals moves the points exactly as with them (the normals share its terms)."""
+    rng = np.random.default_rng(3)
+    p = rng.uniform(-30, 30, size=(200, 3))
+    n = rng.normal(size=(200, 3))
+    t = rng.uniform(0.0, 0.1, size=200)
+    old, new = se3.exp(np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.02])), se3.exp(np.array([0.7, 0.1, 0.0, 0.0, 0.01, 0.03]))
+    p_both, n_both = redeskew(p, n, t, old, new, 0.1)
+    p_alone, none = redeskew(p, None, t, old, new, 0.1)
+    assert none is None
+    np.testing.assert_array_equal(p_both, p_alone)
+    s = t / 0.1
+    np.testing.assert_array_equal(n_both, screw_apply(se3.log(new), s, screw_apply(-se3.log(old), s, n, True), True))
