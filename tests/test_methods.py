@@ -96,7 +96,8 @@ def test_a_command_and_ours_in_process_give_the_same_poses_close_to_the_truth(se
     assert _truth_error_m(sequence_dir, ours.poses) < 0.05  # 5 frames at 8 m/s, 3 cm noise
 
 
-def test_a_sequence_in_memory_is_handed_over_as_the_sensor_view_with_the_same_poses(sequence_dir, tmp_path):
+def test_a_sequence_in_memory_is_handed_over_as_the_sensor_view_with_the_same_poses(sequence_dir, tmp_path,
+                                                                                    monkeypatch):
     from simlidar.in_memory import InMemorySequence, simulate_in_memory
     from simlidar.sensor import load_sensor
     from tools.staging import sensor_view
@@ -110,7 +111,9 @@ def test_a_sequence_in_memory_is_handed_over_as_the_sensor_view_with_the_same_po
     assert view[0].fields.dtype.names == ("ring",)
     np.testing.assert_array_equal(view[3].points, memory[3].points)
     # In memory (the view), staged on disk, and from the simulated folder: the same poses.
-    in_memory = run_method_staged(method_from_name("bl"), memory)
+    with monkeypatch.context() as patch:  # in memory, an in-process method is handed nothing on disk
+        patch.setattr("tools.staging.stage_input", lambda *a, **k: pytest.fail("staged on disk"))
+        in_memory = run_method_staged(method_from_name("bl"), memory)
     with staged(memory) as stage:
         on_disk = method_from_name("bl").run_staged(stage)
     np.testing.assert_allclose(in_memory.poses, on_disk.poses, atol=1e-9)  # times.txt is text

@@ -125,12 +125,7 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
     from simlidar.formats.kitti import format_times, write_bin
     from simlidar.sequence import sweep_start_times
 
-    fields = check_fields(fields)
-    if sequence.sensor is None:
-        raise StagingError(f"{sequence.path}: no sensor model to hand to the method (give the sequence a "
-                           "sensor.yaml)")
-    if (getattr(sequence, "manifest", None) or {}).get("motion_distortion") is False:
-        fields = tuple(f for f in fields if f != "time_s")
+    fields = _fields_to_hand_over(sequence, fields)
     folder = Path(folder)
     root, out_dir = folder / "input", folder / "output"
     (root / "velodyne").mkdir(parents=True)
@@ -149,14 +144,11 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
                 _place(src, root / "velodyne" / f"{name}.bin")
             else:
                 write_bin(root / "velodyne" / f"{name}.bin", frame.points, intensity)
-            have = [f for f in fields if frame.field(f) is not None]
-            if have:
+            record = _sensor_record(frame.fields, fields)
+            if record is not None:
                 (root / "fields").mkdir(exist_ok=True)
-                record = np.empty(len(frame.points), dtype=[(f, frame.field(f).dtype) for f in have])
-                for f in have:
-                    record[f] = frame.field(f)
                 np.save(root / "fields" / f"{name}.npy", record, allow_pickle=False)
-                staged_fields.update(have)
+                staged_fields.update(record.dtype.names)
     sensor_file = Path(sequence.path) / "sensor.yaml"
     if sensor_file.is_file():
         shutil.copyfile(sensor_file, root / "sensor.yaml")
@@ -175,22 +167,33 @@ def sensor_view(sequence, fields=DEFAULT_FIELDS):
     """
     from dataclasses import replace
 
+    fields = _fields_to_hand_over(sequence, fields)
+    return replace(sequence, fields=[_sensor_record(r, fields) for r in sequence.fields], poses=None,
+                   degeneracy=[], manifest={})
+
+
+def _fields_to_hand_over(sequence, fields) -> tuple[str, ...]:
+    """The checked ``fields``, less ``time_s`` for a sequence simulated without motion distortion;
+    StagingError when the sequence has no sensor model."""
     fields = check_fields(fields)
     if sequence.sensor is None:
-        raise StagingError(f"{sequence.path}: no sensor model to hand to the method")
+        raise StagingError(f"{sequence.path}: no sensor model to hand to the method (give the sequence a "
+                           "sensor.yaml)")
     if (getattr(sequence, "manifest", None) or {}).get("motion_distortion") is False:
         fields = tuple(f for f in fields if f != "time_s")
+    return fields
 
-    def cut(record):
-        have = [f for f in fields if record is not None and record.dtype.names and f in record.dtype.names]
-        if not have:
-            return None
-        out = np.empty(len(record), dtype=[(f, record.dtype[f]) for f in have])
-        for f in have:
-            out[f] = record[f]
-        return out
 
-    return replace(sequence, fields=[cut(r) for r in sequence.fields], poses=None, degeneracy=[], manifest={})
+def _sensor_record(record: np.ndarray | None, fields: tuple[str, ...]) -> np.ndarray | None:
+    """A frame's (N,) per-point record cut to ``fields`` (those it has), or None when it has none of them."""
+    names = record.dtype.names or () if record is not None else ()
+    have = [f for f in fields if f in names]
+    if not have:
+        return None
+    out = np.empty(len(record), dtype=[(f, record.dtype[f]) for f in have])
+    for f in have:
+        out[f] = record[f]
+    return out
 
 
 @contextmanager
