@@ -33,7 +33,7 @@ from typing import Any
 
 import yaml
 
-from paramspec import ParamError, Params, differences, param, section
+from paramspec import ParamError, Params, assignments, differences, param, section
 from simlidar.yaml_file import read_yaml
 
 NOISE_MODELS = ("range", "isotropic")
@@ -257,6 +257,14 @@ def variant(name: str) -> OdometryConfig:
 def variant_changes() -> dict[str, dict]:
     """Each variant's changes to the defaults (the salo variant's), as ``{dotted key: value}``."""
     return {name: {k: v for k, v in differences(c, SALO).items() if k != "name"} for name, c in VARIANTS.items()}
+
+
+def changes_from_assignments(pairs, origin: str = "--set") -> dict:
+    """``KEY=VALUE`` texts with dotted keys (``ncf.max_normal_std_deg=3``) -> the changes, nested by stage
+    as a config YAML holds them, each value converted and checked by its key's declaration.
+    Overlay them with ``config_from_dict(changes, base=...)``. Raises ConfigError naming the key."""
+    return OdometryConfig.schema().read(assignments(pairs, origin), origin, coerce=True, partial=True,
+                                        error=ConfigError)
 
 
 def config_from_dict(data: Any, base: OdometryConfig | None = None, origin: str = "config", *,

@@ -20,9 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from odometry.config import DEFAULT_VARIANT, VARIANTS, ConfigError, OdometryConfig, config_from_dict, variant
+from odometry.config import DEFAULT_VARIANT, VARIANTS, ConfigError, changes_from_assignments, config_from_dict, variant
 from odometry.pipeline import run_sequence
-from paramspec import assignments
 from simlidar import se3
 from simlidar.dataset import open_sequence
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
@@ -50,8 +49,10 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="an odometry parameter changed for our variants (dotted, e.g. ncf.max_normal_std_deg=3)")
     args = ap.parse_args()
-    changes = OdometryConfig.schema().read(assignments(args.set), "--set", coerce=True, partial=True,
-                                           error=ConfigError)
+    try:
+        changes = changes_from_assignments(args.set)
+    except ConfigError as exc:
+        ap.error(str(exc))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     print(f"{'excerpt':11s} {'method':20s} {'t, cm':>6s} {'r, deg':>7s}")
     for name, (folder, sensor, kitti) in EXCERPTS.items():

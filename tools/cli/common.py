@@ -116,11 +116,10 @@ def parse_config_set(pairs: list[str]) -> dict:
     ``config_from_dict(changes, base=..., origin="--set")``. Raises CommandError naming the key;
     an old flat key names its new one ("key 'voxel_size_m' is unknown; did you mean 'filter.voxel_size_m'?").
     """
-    from odometry.config import ConfigError, OdometryConfig
+    from odometry.config import changes_from_assignments
 
     try:
-        return OdometryConfig.schema().read(assignments(pairs), "--set", coerce=True, partial=True,
-                                            error=ConfigError)
+        return changes_from_assignments(pairs)
     except ParamError as exc:
         raise CommandError(str(exc)) from None
 
