@@ -151,11 +151,17 @@ class LocalMap:
             normals: each neighbour's noise lies along the beam that measured it (kept
             per point from the sensor position at insertion), propagated to the normal
             as in ``odometry.ncf``; a normal whose variance reaches this is no plane.
+        min_spacing_m: a new point closer than this to a point already in the map is not
+            added (0: every point while its voxel has room), m. The map then keeps its first
+            observation of a surface instead of a copy per scan: each copy would be matched
+            next (a scan resamples the same places), need its own normal and grow the k-d tree,
+            and adds nothing the first one does not already say.
     """
 
     def __init__(self, voxel_size_m: float, max_points_per_voxel: int, max_distance_m: float,
                  normal_neighbours: int, noise_std_m: float, max_curvature: float,
-                 ncf_c_tau_rad2: float | None = None, prune_stride_m: float = PRUNE_STRIDE_M):
+                 ncf_c_tau_rad2: float | None = None, prune_stride_m: float = PRUNE_STRIDE_M,
+                 min_spacing_m: float = 0.0):
         self.voxel_size_m = float(voxel_size_m)
         self.max_points_per_voxel = int(max_points_per_voxel)
         self.max_distance_m = float(max_distance_m)
@@ -169,6 +175,7 @@ class LocalMap:
         self._origins = np.zeros((0, 3))  # sensor position of each point's scan
         self._pruned_at: np.ndarray | None = None  # sensor position at the last pruning
         self.prune_stride_m = float(prune_stride_m)
+        self.min_spacing_m = float(min_spacing_m)
         # Target normals, estimated when first matched and kept until points arrive nearby:
         # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
         self._normals = np.zeros((0, 3))
@@ -224,6 +231,15 @@ class LocalMap:
     def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None) -> int:
         if len(points) == 0:
             return 0
+        if self.min_spacing_m > 0 and len(self.points):
+            # (the points of one update are a scan's voxel centroids, already spaced by its voxel grid)
+            d, _ = self._tree.result().query(points, k=1, distance_upper_bound=self.min_spacing_m, workers=-1)
+            new = ~np.isfinite(d)
+            points = points[new]
+            if payload is not None:
+                payload = payload[new]
+            if len(points) == 0:
+                return 0
         keys = voxel_keys(points, self.voxel_size_m)
         order = np.argsort(keys, kind="stable")
         keys, points = keys[order], points[order]

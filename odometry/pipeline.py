@@ -161,7 +161,8 @@ def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel |
     holding at most ``map.points_per_voxel`` points (the rejector study measured true matches
     9 cm from the map at every range, where GCR's own bound is 10-12 cm within 20 m and
     rejected a third of them). The threshold is then at least the map's spacing,
-    ``map.voxel_size_m / sqrt(map.points_per_voxel)`` (``map_point_spacing_m``).
+    ``map.voxel_size_m / sqrt(map.points_per_voxel)``, or ``map.min_point_spacing_m`` when wider
+    (``map_point_spacing_m``).
     """
     if not with_gcr:
         return Source(scan.points, scan.normals)
@@ -181,8 +182,9 @@ def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel |
 
 
 def map_point_spacing_m(config: OdometryConfig) -> float:
-    """The spacing of a full map voxel's points on a surface through it, m: ``v / sqrt(n)``."""
-    return config.map.voxel_size_m / math.sqrt(config.map.points_per_voxel)
+    """The spacing of a full map voxel's points on a surface through it, m: ``v / sqrt(n)``, or the
+    map's least point spacing when that is wider."""
+    return max(config.map.voxel_size_m / math.sqrt(config.map.points_per_voxel), config.map.min_point_spacing_m)
 
 
 def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
@@ -208,7 +210,7 @@ def new_local_map(config: OdometryConfig, sensor: LidarModel | None) -> LocalMap
              if config.ncf.enabled and config.ncf.applies_to in ("map", "both") else None)
     return LocalMap(config.map.voxel_size_m, config.map.points_per_voxel,
                     config.map.max_distance_m or config.clean.max_range_m, config.filter.normal_neighbours, noise,
-                    config.filter.max_curvature, c_tau)
+                    config.filter.max_curvature, c_tau, min_spacing_m=config.map.min_point_spacing_m)
 
 
 def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:

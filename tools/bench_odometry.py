@@ -83,7 +83,7 @@ def peak_memory_mb(seq, name: str, frames: int) -> float:
     return peak / 1e6
 
 
-def bench(scene: str, sensor: str, frames: int, memory_frames: int) -> None:
+def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[str] | None = None) -> None:
     seq = simulate(scene, sensor, frames)
     points = np.mean([len(p) for p in seq.points])
     path_m = float(evaluate_trajectory(seq.poses, seq.poses).path_length_m)
@@ -91,6 +91,8 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int) -> None:
     rows = []
     reference = None
     for name, spec in PEERS.items():
+        if only and name not in only:
+            continue
         reason = peer_unavailable_reason(name)
         if reason is not None:
             print(f"{spec.label}: {reason}")
@@ -101,11 +103,13 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int) -> None:
         if name == REFERENCE_PEER:
             reference = run.seconds
     for name in (*OURS, "default"):
+        if only and name not in only:
+            continue
         v = DEFAULT_VARIANT if name == "default" else name
         poses, seconds, stages = run_ours(seq, v)
         label = f"default ({v})" if name == "default" else name
         rows.append((label, seconds, t_err_pct(seq.poses, poses), stages,
-                     peak_memory_mb(seq, v, memory_frames)))
+                     peak_memory_mb(seq, v, memory_frames) if memory_frames > 0 else float("nan")))
     header = (f"{'method':18s} {'frames/s':>8s} {'/KISS':>6s} {'t_err %':>8s} {'peak MB':>8s} "
               + " ".join(f"{s:>8s}" for s in (*STAGES, "other")))
     print(header)
@@ -124,10 +128,18 @@ def main() -> None:
     ap.add_argument("--scene", default="city")
     ap.add_argument("--sensors", default="salo32,hdl32e", help="comma-separated presets (default salo32,hdl32e)")
     ap.add_argument("--frames", type=int, default=100)
-    ap.add_argument("--memory-frames", type=int, default=20)
+    ap.add_argument("--memory-frames", type=int, default=20, help="frames of the peak-memory run (0: none)")
+    ap.add_argument("--methods", default="", help="comma-separated subset of the methods (default: all); "
+                    "kiss-icp is the ratios' reference")
     args = ap.parse_args()
+    if args.memory_frames < 0 or args.frames < 2:
+        ap.error("--frames must be at least 2 and --memory-frames at least 0")
+    only = {m.strip() for m in args.methods.split(",") if m.strip()} or None
+    known = {*PEERS, *OURS, "default"}
+    if only and only - known:
+        ap.error(f"unknown method(s) {', '.join(sorted(only - known))} (known: {', '.join(sorted(known))})")
     for sensor in args.sensors.split(","):
-        bench(args.scene, sensor.strip(), args.frames, args.memory_frames)
+        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only)
     print("\n(/KISS: the method's time over KISS-ICP's on the same frames in this run, below 1 = faster; stage "
           "columns: ms per frame, 'other' the rest (cleaning, waiting for a k-d tree); the de-skew includes "
           "the refinements; peak MB: traced allocation peak over the first --memory-frames frames; t_err %: "
