@@ -133,7 +133,7 @@ class MapParams(_Stage):
     section_name = "map"
     voxel_size_m: float = param(1.0, "edge of the map's voxels", above=0.0)
     points_per_voxel: int = param(20, "most points a map voxel holds", min=1)
-    min_point_spacing_m: float = param(0.0, "a scan point closer than this to a map point is not added (0: "
+    min_point_spacing_m: float = param(0.3, "a scan point closer than this to a map point is not added (0: "
                                        "every point while its voxel has room)", min=0.0)
     max_distance_m: float | None = param(None, "map points farther than this from the sensor are dropped (null: "
                                          "clean.max_range_m)", above=0.0)

@@ -49,21 +49,22 @@ def test_map_min_spacing_keeps_the_first_observation_of_a_surface():
     whatever room its voxel has; payloads stay with the points that were added."""
     rng = np.random.default_rng(5)
     grid = np.stack(np.meshgrid(np.arange(0.0, 6.0, 0.5), np.arange(0.0, 6.0, 0.5), [0.0]), -1).reshape(-1, 3)
+    above = np.array([0.0, 0.0, 2.0])  # the sensor, off the surface
     m = make_map(min_spacing_m=0.2)
-    assert m.update(grid, np.zeros(3), payload=np.arange(len(grid))).added == len(grid)
+    assert m.update(grid, above, payload=np.arange(len(grid))).added == len(grid)
     # the same surface seen again, each point moved by less than the spacing: nothing new
     jitter = rng.normal(size=grid.shape)
     jitter *= 0.15 / np.linalg.norm(jitter, axis=1, keepdims=True)
-    assert m.update(grid + jitter, np.zeros(3), payload=np.arange(len(grid))).added == 0
+    assert m.update(grid + jitter, above, payload=np.arange(len(grid))).added == 0
     # points half-way between the grid's (0.25 m from the nearest) are new
     between = grid + [0.25, 0.0, 0.0]
-    stats = m.update(between, np.zeros(3), payload=1000 + np.arange(len(grid)))
+    stats = m.update(between, above, payload=1000 + np.arange(len(grid)))
     assert stats.added == len(grid) and len(m) == 2 * len(grid)
     assert np.array_equal(m.points[m.payload >= 1000], between[m.payload[m.payload >= 1000] - 1000])
     # without a spacing every point goes in while its voxel has room
     plain = make_map()
-    plain.update(grid, np.zeros(3))
-    assert plain.update(grid + jitter, np.zeros(3)).added == len(grid)
+    plain.update(grid, above)
+    assert plain.update(grid + jitter, above).added == len(grid)
 
 
 def test_map_payload_follows_its_points_through_caps_and_pruning():
