@@ -2,6 +2,7 @@
 
     python -m tools.bench_odometry                           # 100 frames of the city, salo32 and hdl32e
     python -m tools.bench_odometry --frames 200 --scene suburb --sensors hdl32e
+    python -m tools.bench_odometry --methods kiss-icp,salo,default --set map.min_point_spacing_m=0
 
 For each sensor the sequence is simulated once into memory (``simlidar.in_memory``,
 motion distortion on, per-point times given: the frames every method gets), then
@@ -24,7 +25,7 @@ import tracemalloc
 
 import numpy as np
 
-from odometry.config import DEFAULT_VARIANT, variant
+from odometry.config import DEFAULT_VARIANT, ConfigError, changes_from_assignments, config_from_dict, variant
 from odometry.metrics import evaluate_trajectory
 from odometry.pipeline import STAGES, Odometry
 from simlidar.sequence import deskew_times
@@ -61,9 +62,15 @@ def t_err_pct(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, bool]:
     return evaluate_trajectory(T_gt, T_est, lengths_m=SHORT_SEGMENTS_M).t_err_pct, True
 
 
+# Changes to every variant of ours (--set), nested by stage as a config YAML holds them.
+CHANGES: dict = {}
+
+
 def run_ours(seq, name: str, frames: int | None = None) -> tuple[np.ndarray, float, dict]:
-    """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` over the sequence's frames."""
-    odo = Odometry(variant(name), seq.sensor)
+    """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` (with ``CHANGES``) over the
+    sequence's frames."""
+    config = config_from_dict(CHANGES, base=variant(name)) if CHANGES else variant(name)
+    odo = Odometry(config, seq.sensor)
     n = len(seq) if frames is None else frames
     data = [seq[k] for k in range(n)]
     t = time.perf_counter()
@@ -131,7 +138,13 @@ def main() -> None:
     ap.add_argument("--memory-frames", type=int, default=20, help="frames of the peak-memory run (0: none)")
     ap.add_argument("--methods", default="", help="comma-separated subset of the methods (default: all); "
                     "kiss-icp is the ratios' reference")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="an odometry parameter changed for every variant of ours (dotted, repeatable)")
     args = ap.parse_args()
+    try:
+        CHANGES.update(changes_from_assignments(args.set))
+    except ConfigError as exc:
+        ap.error(str(exc))
     if args.memory_frames < 0 or args.frames < 2:
         ap.error("--frames must be at least 2 and --memory-frames at least 0")
     only = {m.strip() for m in args.methods.split(",") if m.strip()} or None
