@@ -13,8 +13,9 @@ Design (the voxel map of KISS-ICP, Vizzo et al. 2023, with normals computed in
 the map): points in world coordinates, bucketed in cubic voxels of
 ``voxel_size_m`` holding at most ``max_points_per_voxel`` points each (a full
 voxel takes no more points, so the map keeps its first, stable observations and
-its size is bounded by the volume, not the time); points farther than
-``max_distance_m`` from the sensor are dropped. A target normal is the PCA
+its size is bounded by the volume, not the time), and a point within
+``min_spacing_m`` of a map point is not added (the surface is already there);
+points farther than ``max_distance_m`` from the sensor are dropped. A target normal is the PCA
 normal of the target point's ``normal_neighbours`` nearest map points, computed
 only for points that are matched, and only where the neighbourhood is a plane:
 it must extend along its second axis well beyond the range noise (points of
