@@ -428,7 +428,8 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
     })
     errors = [r for r in results if r.get("error")]
     lines = [f"# Generalisation suite: {params.split} seeds {list(params.seed_list)}", "",
-             f"{len(results)} sequences ({len(results) - len(errors)} simulated), {params.frames} frames each; "
+             f"{len(results)} sequences ({len(results) - len(errors)} simulated without error), "
+             f"{params.frames} frames each; "
              f"families {', '.join(sorted({r['sequence']['family'] for r in results}))}; kinds "
              f"{', '.join(params.kinds)}. KITTI t_err over "
              f"{', '.join(f'{v:g}' for v in params.segment_lengths_m)} m "
