@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import kdtree_query
 from .filters import background
 from .icp import Target
 from .ncf import ncf_keep, normal_covariance_along_beams
@@ -234,7 +235,7 @@ class LocalMap:
             return 0
         if self.min_spacing_m > 0 and len(self.points):
             # (the points of one update are a scan's voxel centroids, already spaced by its voxel grid)
-            d, _ = self._tree.result().query(points, k=1, distance_upper_bound=self.min_spacing_m, workers=-1)
+            d, _ = kdtree_query.query(self._tree.result(), points, k=1, distance_upper_bound=self.min_spacing_m)
             new = ~np.isfinite(d)
             points = points[new]
             if payload is not None:

@@ -34,8 +34,8 @@ def test_set_changes_every_variant_of_ours(monkeypatch):
             raise RuntimeError("stop")
 
     monkeypatch.setattr(bench_odometry, "Odometry", Recorder)
-    monkeypatch.setattr(bench_odometry, "CHANGES", {"map": {"min_point_spacing_m": 0.0}})
     for name in ("salo", "salo-map"):
         with pytest.raises(RuntimeError):
-            bench_odometry.run_ours(type("Seq", (), {"sensor": None})(), name)
+            bench_odometry.run_ours(type("Seq", (), {"sensor": None})(), name,
+                                    changes={"map": {"min_point_spacing_m": 0.0}})
     assert seen == {"salo": 0.0, "salo-map": 0.0}

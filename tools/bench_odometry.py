@@ -62,15 +62,11 @@ def t_err_pct(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, bool]:
     return evaluate_trajectory(T_gt, T_est, lengths_m=SHORT_SEGMENTS_M).t_err_pct, True
 
 
-# Changes to every variant of ours (--set), nested by stage as a config YAML holds them.
-CHANGES: dict = {}
-
-
-def run_ours(seq, name: str, frames: int | None = None) -> tuple[np.ndarray, float, dict]:
-    """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` (with ``CHANGES``) over the
-    sequence's frames."""
-    config = config_from_dict(CHANGES, base=variant(name)) if CHANGES else variant(name)
-    odo = Odometry(config, seq.sensor)
+def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = None
+             ) -> tuple[np.ndarray, float, dict]:
+    """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` over the sequence's frames.
+    changes: parameters changed (``--set``), nested by stage as a config YAML holds them."""
+    odo = Odometry(config_from_dict(changes or {}, base=variant(name)), seq.sensor)
     n = len(seq) if frames is None else frames
     data = [seq[k] for k in range(n)]
     t = time.perf_counter()
@@ -81,16 +77,17 @@ def run_ours(seq, name: str, frames: int | None = None) -> tuple[np.ndarray, flo
     return np.stack(odo.poses), seconds, stages
 
 
-def peak_memory_mb(seq, name: str, frames: int) -> float:
+def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None) -> float:
     """Peak traced allocation (numpy included) while registering ``frames`` frames (slows the run: apart)."""
     tracemalloc.start()
-    run_ours(seq, name, frames)
+    run_ours(seq, name, frames, changes)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return peak / 1e6
 
 
-def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[str] | None = None) -> None:
+def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[str] | None = None,
+          changes: dict | None = None) -> None:
     seq = simulate(scene, sensor, frames)
     points = np.mean([len(p) for p in seq.points])
     path_m = float(evaluate_trajectory(seq.poses, seq.poses).path_length_m)
@@ -113,10 +110,10 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
         if only and name not in only:
             continue
         v = DEFAULT_VARIANT if name == "default" else name
-        poses, seconds, stages = run_ours(seq, v)
+        poses, seconds, stages = run_ours(seq, v, changes=changes)
         label = f"default ({v})" if name == "default" else name
         rows.append((label, seconds, t_err_pct(seq.poses, poses), stages,
-                     peak_memory_mb(seq, v, memory_frames) if memory_frames > 0 else float("nan")))
+                     peak_memory_mb(seq, v, memory_frames, changes) if memory_frames > 0 else float("nan")))
     header = (f"{'method':18s} {'frames/s':>8s} {'/KISS':>6s} {'t_err %':>8s} {'peak MB':>8s} "
               + " ".join(f"{s:>8s}" for s in (*STAGES, "other")))
     print(header)
@@ -142,7 +139,7 @@ def main() -> None:
                     help="an odometry parameter changed for every variant of ours (dotted, repeatable)")
     args = ap.parse_args()
     try:
-        CHANGES.update(changes_from_assignments(args.set))
+        changes = changes_from_assignments(args.set)
     except ConfigError as exc:
         ap.error(str(exc))
     if args.memory_frames < 0 or args.frames < 2:
@@ -152,7 +149,7 @@ def main() -> None:
     if only and only - known:
         ap.error(f"unknown method(s) {', '.join(sorted(only - known))} (known: {', '.join(sorted(known))})")
     for sensor in args.sensors.split(","):
-        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only)
+        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only, changes)
     print("\n(/KISS: the method's time over KISS-ICP's on the same frames in this run, below 1 = faster; stage "
           "columns: ms per frame, 'other' the rest (cleaning, waiting for a k-d tree); the de-skew includes "
           "the refinements; peak MB: traced allocation peak over the first --memory-frames frames; t_err %: "

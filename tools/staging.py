@@ -185,15 +185,13 @@ def _fields_to_hand_over(sequence, fields) -> tuple[str, ...]:
 
 
 def _sensor_record(record: np.ndarray | None, fields: tuple[str, ...]) -> np.ndarray | None:
-    """A frame's (N,) per-point record cut to ``fields`` (those it has), or None when it has none of them."""
-    names = record.dtype.names or () if record is not None else ()
+    """A frame's (N,) per-point record cut to ``fields`` (those it has, a packed copy), or None when it
+    has none of them."""
+    from numpy.lib.recfunctions import repack_fields
+
+    names = () if record is None else record.dtype.names or ()
     have = [f for f in fields if f in names]
-    if not have:
-        return None
-    out = np.empty(len(record), dtype=[(f, record.dtype[f]) for f in have])
-    for f in have:
-        out[f] = record[f]
-    return out
+    return repack_fields(record[have]) if have else None
 
 
 @contextmanager
