@@ -140,6 +140,8 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
         import json
 
         returns = json.loads((out / "manifest.json").read_text())["points"]
+        cpu_floor_write = floor_write_cpu_s(Path(tmp) / "floor", frames, sizes)
+    cpu_floor_noise = floor_noise_cpu_s(returns // frames)
     # The same rays, bare: each column from its firing pose, 2 threads, no noise, no truth, nothing written.
     sim = SweepSimulator(scene.world, sensor, seed=seed)
     rc = sim.raycaster
@@ -173,6 +175,34 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
           f"{1e3 * cpu_sim / frames:.0f} ms, bare cast {1e3 * cpu_bare:.0f} ms ({cpu_sim / frames / cpu_bare:.2f}x)")
     print(f"  on disk per return: scan {per_return['velodyne']:.1f} B + truth {per_return['sidecar']:.1f} B = "
           f"{sum(per_return.values()):.1f} B")
+    floor = cpu_bare + cpu_floor_write + cpu_floor_noise
+    print(f"  floor beyond the cast, CPU per sweep: the frame's files written new with their sha256 "
+          f"{1e3 * cpu_floor_write:.1f} ms, its range noise drawn {1e3 * cpu_floor_noise:.1f} ms: on 2 fully used "
+          f"cores at best {floor / cpu_bare:.2f}x the bare cast's time (no truth computed, nothing encoded)")
+
+
+def floor_write_cpu_s(folder: Path, frames: int, sizes: dict[str, int]) -> float:
+    """CPU seconds a frame to write a sequence's bytes (``sizes``: bytes per subfolder over ``frames``
+    frames) as new files, each in one write with its sha256, by the writer's own
+    ``write_checksummed``: the disk work of any simulate, whatever it computes."""
+    from simlidar.formats.atomic import write_checksummed
+
+    folder.mkdir()
+    blobs = [np.random.default_rng(k).bytes(max(1, n // frames)) for k, n in enumerate(sizes.values())]
+    c = time.process_time()
+    for k in range(frames):
+        for j, blob in enumerate(blobs):
+            write_checksummed(folder / f"{k:06d}.{j}", blob)
+    return (time.process_time() - c) / frames
+
+
+def floor_noise_cpu_s(returns: int, repeats: int = 20) -> float:
+    """CPU seconds to draw ``returns`` Gaussian range errors (numpy's generator, as the sweep does)."""
+    rng = np.random.default_rng(0)
+    c = time.process_time()
+    for _ in range(repeats):
+        rng.standard_normal(returns)
+    return (time.process_time() - c) / repeats
 
 
 def _rss_mb() -> float:

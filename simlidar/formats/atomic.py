@@ -52,6 +52,16 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def write_checksummed(path: Path, data) -> str:
+    """Write ``data`` (bytes or a byte-format memoryview) to a new file ``path`` in one unbuffered
+    write; returns its sha256 (hex), taken from the bytes in memory (no read back).
+
+    Used for the frames of a staged folder (not atomic by itself: the folder is)."""
+    with open(path, "wb", buffering=0) as fh:
+        fh.write(data)
+    return hashlib.sha256(data).hexdigest()
+
+
 def sha256_file(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -197,4 +207,4 @@ class StagedFolder:
 
 
 __all__ = ["INCOMPLETE_MARKER", "StagedFolder", "atomic_write_bytes", "atomic_write_text", "remove_stale_partials",
-           "sha256_file"]
+           "sha256_file", "write_checksummed"]

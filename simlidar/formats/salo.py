@@ -30,7 +30,6 @@ memory; ``open_salo`` reads it back.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import queue
 import threading
@@ -43,7 +42,7 @@ from ..degeneracy import CSV_HEADER, csv_row, degeneracy
 from ..sensor import LidarModel, load_sensor_file
 from ..sequence import DatasetError
 from . import truth
-from .atomic import StagedFolder, sha256_file
+from .atomic import StagedFolder, sha256_file, write_checksummed
 from .kitti import format_kitti_poses, format_times, read_kitti_poses, read_times
 from .scan_folders import Sequence, check_bin_sizes
 
@@ -175,9 +174,7 @@ class SequenceWriter:
                                compress=self.compress_truth)
         for rel, data in ((f"velodyne/{name}.bin", memoryview(points).cast("B")),
                           (f"sidecar/{name}{SIDECAR_SUFFIX[self.format_version]}", car)):
-            with open(self.tmp / rel, "wb", buffering=0) as fh:
-                fh.write(data)
-            self._checksums[rel] = hashlib.sha256(data).hexdigest()
+            self._checksums[rel] = write_checksummed(self.tmp / rel, data)
             self._bytes[rel.split("/")[0]] += len(data)
         self._degeneracy_rows[k] = csv_row(k, degeneracy(scan.true_xyz, scan.normal))
 
