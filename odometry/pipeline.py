@@ -76,6 +76,9 @@ class FrameDiagnostics:
     implausible: bool = False
     deskewed: bool = False
     seconds: dict = field(default_factory=dict)
+    # Open-loop runs only (``Odometry.register(true_motion=...)``): the frame's own estimate of its
+    # motion T_prev_cur (4, 4), which the state did not take (it took the true motion).
+    estimated_motion: np.ndarray | None = None
 
     @property
     def extrapolated(self) -> bool:
@@ -311,12 +314,20 @@ class Odometry:
         times_s: np.ndarray | None = None,
         rings: np.ndarray | None = None,
         stamp_s: float | None = None,
+        true_motion: np.ndarray | None = None,
     ) -> np.ndarray:
         """Register the next scan and return its pose ``T_world_lidar`` (4, 4).
 
         points: (N, 3) as measured, m. times_s: (N,) per-point time since the sweep
         start, s (enables de-skew). rings: (N,) int ring per point (else from the
         elevation and the sensor table). stamp_s: the sweep's start time, s.
+
+        true_motion: (4, 4) this frame's true motion ``T_prev_cur``, for an open-loop
+        evaluation (the simulator knows it): the frame is registered as always and its
+        estimate kept in ``FrameDiagnostics.estimated_motion``, but the pose, the motion
+        prior, the de-skew and the map advance with the true motion. Every frame is then
+        registered against a target built from true poses, which separates the error a
+        registration makes from the drift its errors feed back (``tools.open_loop``).
         """
         cfg, st = self.config, self.state
         t_start = time.perf_counter()
@@ -360,6 +371,9 @@ class Odometry:
             T = T_guess
         else:
             T, T_deskew = self._align(scan, T_guess, period, deskewing, diag, seconds)
+        if true_motion is not None and st.poses:
+            diag.estimated_motion = T
+            T = np.asarray(true_motion, dtype=float)
 
         self._update(scan, T, T_deskew, T_guess, clean.times_s if deskewing else None, period, diag, seconds)
         seconds["total"] = time.perf_counter() - t_start
@@ -621,21 +635,28 @@ def run_sequence(
     sensor: LidarModel | None = None,
     frames: slice | None = None,
     on_frame=None,
+    true_poses: np.ndarray | None = None,
 ) -> OdometryRun:
     """Run the odometry over (a slice of) a sequence; ``on_frame(k, diagnostics)`` after each frame.
 
     The poses are relative to the first frame run. The sensor defaults to the sequence's own.
+    true_poses: (F, 4, 4) the sequence's true poses, for an open-loop run (``Odometry.register``'s
+    ``true_motion``): the state follows the truth, each frame's estimate is in its diagnostics.
     """
     sensor = sensor or sequence.sensor
     idx = np.arange(len(sequence))[frames or slice(None)]
     if len(idx) == 0:
         raise OdometryError(f"{sequence.path}: no frames selected")
+    if true_poses is not None and len(true_poses) != len(sequence):
+        raise OdometryError(f"{sequence.path}: {len(true_poses)} true poses for {len(sequence)} frames")
     odo = Odometry(config, sensor)
     t0 = time.perf_counter()
-    for k in idx:
+    for j, k in enumerate(idx):
         frame = sequence[int(k)]
         stamp = float(sequence.times[k]) if sequence.times is not None and k < len(sequence.times) else None
-        odo.register(frame.points, times_s=deskew_times(sequence, frame), rings=frame.ring, stamp_s=stamp)
+        truth = None if true_poses is None or j == 0 else se3.inverse(true_poses[idx[j - 1]]) @ true_poses[k]
+        odo.register(frame.points, times_s=deskew_times(sequence, frame), rings=frame.ring, stamp_s=stamp,
+                     true_motion=truth)
         if on_frame is not None:
             on_frame(int(k), odo.last)
     times = None if sequence.times is None else np.asarray(sequence.times)[idx]
