@@ -324,10 +324,13 @@ class Odometry:
 
         true_motion: (4, 4) this frame's true motion ``T_prev_cur``, for an open-loop
         evaluation (the simulator knows it): the frame is registered as always and its
-        estimate kept in ``FrameDiagnostics.estimated_motion``, but the pose, the motion
-        prior, the de-skew and the map advance with the true motion. Every frame is then
-        registered against a target built from true poses, which separates the error a
-        registration makes from the drift its errors feed back (``tools.open_loop``).
+        estimate kept in ``FrameDiagnostics.estimated_motion`` (the constant-velocity guess
+        when the frame was extrapolated), but the pose, the motion prior, the de-skew and
+        the map advance with the true motion. Every frame is then registered against a
+        target built from true poses (except that with per-point times the first scan
+        keeps the de-skew the first registration's refinements gave it), which separates
+        the error a registration makes from the drift its errors feed back
+        (``tools.open_loop``).
         """
         cfg, st = self.config, self.state
         t_start = time.perf_counter()

@@ -14,7 +14,8 @@ registration's own error, printed per method over the same frames:
 - along-track error, (t_est - t_true) . unit(t_true), cm per frame: its mean and the
   sum over the distance travelled (%): a bias the closed loop integrates into drift;
 - vertical error (z of the sensor frame), cm per frame: mean;
-- rotation error per frame, degrees: median.
+- rotation error per frame, degrees: median;
+- frames extrapolated (not registered: their errors are left out, their count shown).
 
 The sequence is a generalisation-suite sequence (``salo experiment generalize``), drawn
 for any seed; diagnose on seeds outside the evaluation split. Prints figures; ``--plot``
@@ -40,7 +41,9 @@ class OpenLoopErrors:
     """Per-frame errors of one method's open-loop run (frames 1..F-1).
 
     translation_m, along_m, vertical_m: (F-1,) m; rotation_deg: (F-1,); travelled_m: (F-1,) true motion, m.
-    along_m is nan where the frame moved less than ``MIN_MOTION_M``.
+    extrapolated: (F-1,) bool, frames not registered (too few points, singular, implausible): their
+    errors are nan, since their estimate is the guess, which open loop makes the previous true motion.
+    along_m is also nan where the frame moved less than ``MIN_MOTION_M``.
     """
 
     translation_m: np.ndarray
@@ -48,6 +51,7 @@ class OpenLoopErrors:
     vertical_m: np.ndarray
     rotation_deg: np.ndarray
     travelled_m: np.ndarray
+    extrapolated: np.ndarray
 
     @property
     def along_bias_pct(self) -> float:
@@ -59,18 +63,24 @@ class OpenLoopErrors:
 def open_loop_errors(true_poses: np.ndarray, diagnostics: list) -> OpenLoopErrors:
     """Errors of each frame's estimate (``FrameDiagnostics.estimated_motion``) against the true motion.
 
-    true_poses: (F, 4, 4) of the frames run, in order; diagnostics: the run's F frame diagnostics.
+    true_poses: (F, 4, 4) of the frames run, in order (``true_poses[run.frame_indices]`` for a slice);
+    diagnostics: the run's F frame diagnostics.
     """
+    if len(diagnostics) != len(true_poses):
+        raise ValueError(f"{len(diagnostics)} frame diagnostics for {len(true_poses)} true poses")
     true = se3.inverse(true_poses[:-1]) @ true_poses[1:]
     est = np.stack([d.estimated_motion for d in diagnostics[1:]])
+    extrapolated = np.array([d.extrapolated for d in diagnostics[1:]], dtype=bool)
     err = se3.inverse(true) @ est
     dt = est[:, :3, 3] - true[:, :3, 3]
+    dt[extrapolated] = np.nan
     travelled = np.linalg.norm(true[:, :3, 3], axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         along = np.where(travelled >= MIN_MOTION_M,
                          np.einsum("ij,ij->i", dt, true[:, :3, 3]) / travelled, np.nan)
-    return OpenLoopErrors(np.linalg.norm(err[:, :3, 3], axis=1), along, dt[:, 2],
-                          np.degrees(se3.rotation_angle(err)), travelled)
+    translation = np.where(extrapolated, np.nan, np.linalg.norm(err[:, :3, 3], axis=1))
+    rotation = np.where(extrapolated, np.nan, np.degrees(se3.rotation_angle(err)))
+    return OpenLoopErrors(translation, along, dt[:, 2], rotation, travelled, extrapolated)
 
 
 def run_open_loop(sequence, true_poses: np.ndarray, method: str, changes: dict | None = None) -> OpenLoopErrors:
@@ -108,6 +118,7 @@ def plot_along(errors: dict[str, OpenLoopErrors], title: str, path: Path) -> Non
 def main(argv: list[str] | None = None) -> int:
     from odometry.config import ConfigError, changes_from_assignments
     from tools.experiments.generalize import EVALUATION_SEEDS, KINDS, SENSORS, simulate, suite
+    from tools.methods import MethodError, our_config
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--family", required=True, help="a scene family of the generalisation suite")
@@ -122,24 +133,28 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         changes = changes_from_assignments(args.set)
+        methods = args.methods.split(",")
+        for method in methods:
+            our_config(method)  # an unknown name fails here, before the simulation
         spec = next(s for s in suite((args.seed,), frames=args.frames, families=(args.family,)) if s.kind == args.kind)
-    except (ConfigError, ValueError) as exc:
+        if args.sensor:
+            spec = dataclasses.replace(spec, sensor=args.sensor)
+        if args.seed in EVALUATION_SEEDS:
+            print(f"note: seed {args.seed} is an evaluation seed: report on it, do not choose parameters with it")
+        sequence = simulate(spec)
+    except (ConfigError, MethodError, ValueError) as exc:
         print(f"open_loop: {exc}", file=sys.stderr)
         return 2
-    if args.sensor:
-        spec = dataclasses.replace(spec, sensor=args.sensor)
-    if args.seed in EVALUATION_SEEDS:
-        print(f"note: seed {args.seed} is an evaluation seed: report on it, do not choose parameters with it")
-    sequence = simulate(spec)
     print(f"{spec.name}: {args.frames} frames, open loop (each frame registered against a target from true poses)")
     print(f"{'method':14s} {'t err cm':>9s} {'p90':>6s} {'along cm':>9s} {'along %':>8s} {'vert cm':>8s} "
-          f"{'rot deg':>8s}")
+          f"{'rot deg':>8s} {'extrapolated':>12s}")
     errors = {}
-    for method in args.methods.split(","):
+    for method in methods:
         e = errors[method] = run_open_loop(sequence, sequence.poses, method, changes)
-        print(f"{method:14s} {100 * np.median(e.translation_m):9.2f} {100 * np.percentile(e.translation_m, 90):6.2f} "
-              f"{100 * np.nanmean(e.along_m):+9.2f} {e.along_bias_pct:+8.2f} {100 * np.mean(e.vertical_m):+8.2f} "
-              f"{np.median(e.rotation_deg):8.3f}")
+        print(f"{method:14s} {100 * np.nanmedian(e.translation_m):9.2f} "
+              f"{100 * np.nanpercentile(e.translation_m, 90):6.2f} {100 * np.nanmean(e.along_m):+9.2f} "
+              f"{e.along_bias_pct:+8.2f} {100 * np.nanmean(e.vertical_m):+8.2f} {np.nanmedian(e.rotation_deg):8.3f} "
+              f"{int(e.extrapolated.sum()):12d}")
     if args.plot:
         plot_along(errors, f"{spec.name}: open-loop along-track error", args.plot)
         print(f"wrote {args.plot}")
