@@ -11,8 +11,10 @@ map or target scan) advances with the true motion (``odometry.pipeline.run_seque
 registration's own error, printed per method over the same frames:
 
 - per-frame translation error |t(true^-1 estimate)|, cm: median and 90th percentile;
-- along-track error, (t_est - t_true) . unit(t_true), cm per frame: its mean and the
-  sum over the distance travelled (%): a bias the closed loop integrates into drift;
+- along-track error, (t_est - t_true) . unit(t_true), cm per frame: its mean and its sum
+  over the distance travelled (%). A scan-to-scan odometry adds these up into drift; against
+  a map they need not add up (the map's older points hold the pose where they constrain it),
+  so compare with the closed-loop t_err before reading the sum as drift;
 - vertical error (z of the sensor frame), cm per frame: mean;
 - rotation error per frame, degrees: median;
 - frames extrapolated (not registered: their errors are left out, their count shown).
