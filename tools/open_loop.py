@@ -73,16 +73,15 @@ def open_loop_errors(true_poses: np.ndarray, diagnostics: list) -> OpenLoopError
     true = se3.inverse(true_poses[:-1]) @ true_poses[1:]
     est = np.stack([d.estimated_motion for d in diagnostics[1:]])
     extrapolated = np.array([d.extrapolated for d in diagnostics[1:]], dtype=bool)
+    est[extrapolated] = np.nan  # every error of those frames is nan from here on
     err = se3.inverse(true) @ est
     dt = est[:, :3, 3] - true[:, :3, 3]
-    dt[extrapolated] = np.nan
     travelled = np.linalg.norm(true[:, :3, 3], axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         along = np.where(travelled >= MIN_MOTION_M,
                          np.einsum("ij,ij->i", dt, true[:, :3, 3]) / travelled, np.nan)
-    translation = np.where(extrapolated, np.nan, np.linalg.norm(err[:, :3, 3], axis=1))
-    rotation = np.where(extrapolated, np.nan, np.degrees(se3.rotation_angle(err)))
-    return OpenLoopErrors(translation, along, dt[:, 2], rotation, travelled, extrapolated)
+    return OpenLoopErrors(np.linalg.norm(err[:, :3, 3], axis=1), along, dt[:, 2],
+                          np.degrees(se3.rotation_angle(err)), travelled, extrapolated)
 
 
 def run_open_loop(sequence, true_poses: np.ndarray, method: str, changes: dict | None = None) -> OpenLoopErrors:
@@ -91,7 +90,7 @@ def run_open_loop(sequence, true_poses: np.ndarray, method: str, changes: dict |
     from tools.methods import our_config
     from tools.staging import DEFAULT_FIELDS, sensor_view
 
-    config = our_config(method).replace(**(changes or {}))
+    config = our_config(method, changes)
     view = sensor_view(sequence, DEFAULT_FIELDS)  # what the odometry sees: no poses, no truth
     run = run_sequence(view, config, true_poses=true_poses)
     return open_loop_errors(true_poses, run.diagnostics)
