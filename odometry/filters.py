@@ -17,12 +17,12 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from simlidar.sensor import LidarModel
 
 from .config import OdometryConfig
 from .constraints import restore_constraints
+from .kdtree import KDTree
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import knn, neighbourhood_pca
 from .scan_lines import widen_one_ring_neighbourhoods
@@ -79,13 +79,13 @@ class FilteredScan:
     normal_std_rad: (M,) 1-sigma tilt of the normal about its least certain axis
         (NCF's prediction; nan when the NCF did not run).
     raw_points: (N, 3) the de-skewed raw points the normals were estimated from.
-    raw_tree: cKDTree over ``raw_points`` (None when no normals were estimated).
+    raw_tree: k-d tree over ``raw_points`` (None when no normals were estimated).
     centroids: (V, 3) every voxel centroid, before the filters (what a map keeps).
     centroid_times_s: (V,) their mean firing times, s, or None.
     counts: points after each stage: raw, voxels, ncf, curvature, and "restored"
         (NCF-rejected points kept for a direction they alone constrain).
     seconds: time spent per stage.
-    points_tree: (the points it was started on, a future of the cKDTree over them), started on the
+    points_tree: (the points it was started on, a future of the k-d tree over them), started on the
         background thread when the scan becomes the next scan-to-scan target; None before.
     """
 
@@ -95,7 +95,7 @@ class FilteredScan:
     times_s: np.ndarray | None
     normal_std_rad: np.ndarray
     raw_points: np.ndarray
-    raw_tree: cKDTree | None
+    raw_tree: KDTree | None
     centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     centroid_times_s: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
@@ -107,13 +107,13 @@ class FilteredScan:
 
     def start_points_tree(self) -> None:
         """Build the k-d tree over ``points`` on the background thread (``points_tree``)."""
-        self.points_tree = (self.points, background().submit(cKDTree, self.points))
+        self.points_tree = (self.points, background().submit(KDTree, self.points))
 
-    def tree_of_points(self) -> cKDTree:
+    def tree_of_points(self) -> KDTree:
         """The k-d tree over ``points``: the one started by ``start_points_tree`` unless they moved since."""
         if self.points_tree is not None and self.points_tree[0] is self.points:
             return self.points_tree[1].result()
-        return cKDTree(self.points)
+        return KDTree(self.points)
 
 
 def ncf_noise_model(config: OdometryConfig, sensor_range_noise_std_m: float | None):
@@ -162,7 +162,7 @@ def filter_scan(
                             {"raw": len(raw_points), "voxels": n, "ncf": n, "curvature": n}, seconds)
     # The raw k-d tree (for the normals) is built on a second core while this one
     # computes the voxel grid: both release the GIL, and the two take about as long.
-    building = background().submit(cKDTree, raw_points, balanced_tree=False, compact_nodes=False)
+    building = background().submit(KDTree, raw_points)
     if raw_times_s is None:
         centroids, centroid_times = voxel_centroids(raw_points, config.filter.voxel_size_m), None
     else:

@@ -13,14 +13,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from simlidar import se3
 
-from . import kdtree_query
 from .config import OdometryConfig
 from .constraints import restore_constraints, weakest_translation
 from .estimation import point_to_plane_step
+from .kdtree import KDTree
 from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
 
 
@@ -55,7 +54,7 @@ class Target:
     """
 
     points: np.ndarray
-    tree: cKDTree
+    tree: KDTree
     normals: np.ndarray
     estimate_normals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]] | None = None
     known: np.ndarray | None = None
@@ -121,7 +120,7 @@ def rejectors_for(config: OdometryConfig) -> list[Rejector]:
 
 def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
     """Nearest target point of each (N, 3) point within ``max_distance_m`` (k-d tree, all cores)."""
-    dist, idx = kdtree_query.query(target.tree, points, k=1, distance_upper_bound=max_distance_m)
+    dist, idx = target.tree.query(points, k=1, distance_upper_bound=max_distance_m)
     found = np.isfinite(dist)
     return Matches(np.flatnonzero(found), idx[found], dist[found])
 

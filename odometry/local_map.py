@@ -29,11 +29,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from . import kdtree_query
 from .filters import background
 from .icp import Target
+from .kdtree import KDTree
 from .ncf import ncf_keep, normal_covariance_along_beams
 from .normals import knn, local_pca
 
@@ -187,7 +186,7 @@ class LocalMap:
         self._voxel_counts = np.zeros(0, dtype=np.int64)
         # Optional (N,) values carried with the points (``update``'s payload), None when not used.
         self._payload: np.ndarray | None = None
-        self._tree = background().submit(cKDTree, self.points)
+        self._tree = background().submit(KDTree, self.points)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -227,7 +226,7 @@ class LocalMap:
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
         # (compact nodes: the ICP queries this tree a dozen times per frame, and a compact tree answers
         # them about a quarter faster for a few ms more of building on the background thread)
-        self._tree = background().submit(cKDTree, self.points, balanced_tree=False)
+        self._tree = background().submit(KDTree, self.points)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 
     def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None) -> int:
@@ -235,7 +234,7 @@ class LocalMap:
             return 0
         if self.min_spacing_m > 0 and len(self.points):
             # (the points of one update are a scan's voxel centroids, already spaced by its voxel grid)
-            d, _ = kdtree_query.query(self._tree.result(), points, k=1, distance_upper_bound=self.min_spacing_m)
+            d, _ = self._tree.result().query(points, k=1, distance_upper_bound=self.min_spacing_m)
             new = ~np.isfinite(d)
             points = points[new]
             if payload is not None:

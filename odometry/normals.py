@@ -30,9 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from . import kdtree_query
+from .kdtree import KDTree
 
 
 @dataclass(frozen=True)
@@ -205,25 +204,21 @@ def knn(
     cloud: np.ndarray,
     query_points: np.ndarray,
     k: int,
-    tree: cKDTree | None = None,
-    workers: int = -1,
+    tree: KDTree | None = None,
 ) -> np.ndarray:
     """(M, k) int indices of each query point's k nearest cloud points, nearest first.
 
     Args:
         cloud: (N, 3) searched points, m (N >= k).
         query_points: (M, 3) m.
-        tree: a ``cKDTree`` already built on ``cloud`` (built here if None).
-        workers: threads for the query (-1: all cores, through ``odometry.kdtree_query``).
+        tree: a k-d tree (``odometry.kdtree.KDTree``) already built on ``cloud`` (built here
+            if None); its queries run on every core.
     """
     if len(cloud) < k:
         raise ValueError(f"the cloud has {len(cloud)} points, fewer than k = {k} neighbours")
     if tree is None:
-        tree = cKDTree(cloud, balanced_tree=False, compact_nodes=False)
-    if workers == -1:
-        _, idx = kdtree_query.query(tree, query_points, k=k)
-    else:
-        _, idx = tree.query(query_points, k=k, workers=workers)
+        tree = KDTree(cloud)
+    _, idx = tree.query(query_points, k=k)
     return np.asarray(idx, dtype=np.intp).reshape(len(query_points), k)
 
 
@@ -232,8 +227,7 @@ def estimate_normals(
     k: int = 20,
     query_points: np.ndarray | None = None,
     viewpoint: np.ndarray | None = None,
-    tree: cKDTree | None = None,
-    workers: int = -1,
+    tree: KDTree | None = None,
 ) -> NormalEstimate:
     """Normals of ``query_points`` from their k nearest neighbours in the raw ``cloud``.
 
@@ -245,8 +239,7 @@ def estimate_normals(
             (default: every cloud point).
         viewpoint: (3,) sensor position for the orientation ``n . (q - viewpoint) <= 0``
             (default: the origin of the scan's frame).
-        tree: optional ``cKDTree`` already built on ``cloud``.
-        workers: kd-tree query threads (-1: all cores).
+        tree: optional k-d tree (``odometry.kdtree.KDTree``) already built on ``cloud``.
 
     Returns:
         ``NormalEstimate`` with ``neighbour_indices`` (M, k) into ``cloud``;
@@ -257,7 +250,7 @@ def estimate_normals(
     if k < 3:
         raise ValueError(f"k must be >= 3 to define a plane, got {k}")
     q = cloud if query_points is None else np.asarray(query_points, dtype=np.float64)
-    return neighbourhood_pca(cloud, knn(cloud, q, k, tree=tree, workers=workers), q, viewpoint)
+    return neighbourhood_pca(cloud, knn(cloud, q, k, tree=tree), q, viewpoint)
 
 
 def neighbourhood_pca(

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from simlidar import se3
 from simlidar.formats.atomic import atomic_write_text
@@ -34,6 +33,7 @@ from .deskew import deskew, redeskew
 from .filters import FilteredScan, filter_scan, scan_normals_needed
 from .gcr import correct_kitti_vertical_angle, gcr_threshold_m, ring_of_points
 from .icp import RegistrationResult, Source, Target, register, rejectors_for
+from .kdtree import KDTree
 from .local_map import LocalMap
 from .normals import estimate_normals
 
@@ -502,7 +502,7 @@ class Odometry:
             redeskew_scan(scan, T_deskew, T, period)
             if cfg.match.target == "raw":
                 scan.raw_points, _ = redeskew(scan.raw_points, None, raw_times_s, T_guess, T, period)
-                scan.raw_tree = cKDTree(scan.raw_points, balanced_tree=False, compact_nodes=False)
+                scan.raw_tree = KDTree(scan.raw_points)
         st.target_scan = scan
         if st.local_map is None and cfg.match.target == "filtered":
             scan.start_points_tree()  # (built while the next scan is cleaned and filtered)

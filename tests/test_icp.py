@@ -11,6 +11,7 @@ from odometry.deskew import deskew, redeskew, screw_apply
 from odometry.estimation import point_to_plane_step
 from odometry.filters import voxel_centroids
 from odometry.icp import Source, Target, converged, register
+from odometry.kdtree import KDTree
 from odometry.pipeline import Odometry, OdometryError
 from odometry.rejectors import Matches, distance_rejector, trimmed_rejector
 from simlidar import se3
@@ -72,7 +73,7 @@ def test_termination():
     assert converged(np.array([1e-3, 0, 0, 0, 0, 0]), T, cfg)
     rng = np.random.default_rng(2)
     q, n = planes_cloud(rng)
-    tgt = Target(q, __import__("scipy").spatial.cKDTree(q), n)
+    tgt = Target(q, KDTree(q), n)
     src = Source(se3.transform_points(se3.exp(np.array([0.2, 0, 0, 0, 0, 0.02])), q), -n)
     capped = register(src, tgt, np.eye(4), cfg.replace(icp={"max_iterations": 1}))
     assert capped.iterations == 1 and not capped.converged

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from odometry.config import variant
 from odometry.filters import filter_scan
 from odometry.gcr import gcr_threshold_m
 from odometry.icp import Source, Target, register
+from odometry.kdtree import KDTree
 from odometry.metrics import evaluate_trajectory
 from odometry.pipeline import run_sequence
 from simlidar import se3
@@ -37,7 +37,7 @@ def register_pair(a, b, name, init):
     if cfg.gcr.enabled:
         thr = gcr_threshold_m(sb.points, sb.normals, sb.rings, SENSOR)
         thr[np.isnan(thr)] = np.inf
-    return register(Source(sb.points, sb.normals, thr), Target(ta.points, cKDTree(ta.points), ta.normals), init, cfg)
+    return register(Source(sb.points, sb.normals, thr), Target(ta.points, KDTree(ta.points), ta.normals), init, cfg)
 
 
 @pytest.mark.parametrize("t0", [20.0, 40.0, 60.0])

@@ -123,10 +123,9 @@ class NormalSamples:
 
 def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max_points: int | None) -> NormalSamples:
     """The normals of frame k's ICP points, their true error and the NCF's predictions."""
-    from scipy.spatial import cKDTree
-
     from odometry.deskew import deskew
     from odometry.filters import voxel_centroids
+    from odometry.kdtree import KDTree
     from odometry.ncf import IsotropicNoise, RangeNoise, normal_covariance
     from odometry.normals import angle_between_normals_rad, estimate_normals
     from odometry.pipeline import clean_scan
@@ -142,7 +141,7 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
     centroids = voxel_centroids(raw, config.filter.voxel_size_m)
     if max_points is not None and len(centroids) > max_points:
         centroids = centroids[np.sort(rng.choice(len(centroids), max_points, replace=False))]
-    tree = cKDTree(raw, balanced_tree=False, compact_nodes=False)
+    tree = KDTree(raw)
     est = estimate_normals(raw, k=config.filter.normal_neighbours, query_points=centroids, tree=tree)
     car = frame.fields
     nb_rows = rows[est.neighbour_indices]  # (M, k) sidecar rows of the neighbours

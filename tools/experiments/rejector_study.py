@@ -204,10 +204,9 @@ def prepare_scan(sequence, k: int, config, sensor) -> PreparedScan:
     With a map-target config the filtered points are the voxel centroids, without normals
     (``odometry.filters.scan_normals_needed``), as the odometry makes them.
     """
-    from scipy.spatial import cKDTree
-
     from odometry.deskew import deskew
     from odometry.filters import filter_scan
+    from odometry.kdtree import KDTree
     from odometry.pipeline import clean_scan
 
     frame = sequence[k]
@@ -217,7 +216,7 @@ def prepare_scan(sequence, k: int, config, sensor) -> PreparedScan:
     period = float(np.diff(sequence.times[:2])[0]) if len(sequence.times) > 1 else sensor.sweep_period_s
     raw = deskew(clean.points, times, true_motion(sequence.poses, k), period)
     scan = filter_scan(raw, config, clean.rings, sensor, raw_times_s=times)
-    tree = scan.raw_tree if scan.raw_tree is not None else cKDTree(raw)
+    tree = scan.raw_tree if scan.raw_tree is not None else KDTree(raw)
     truth = truth_of_points(scan.points, tree, rows, frame.fields)
     return PreparedScan(k, raw, rows, scan, truth, tree, frame.fields)
 
@@ -365,7 +364,7 @@ def rejection_counts(case: TargetCase, source, T: np.ndarray, criteria: TruthCri
     from odometry.rejectors import Matches
 
     moved = se3.transform_points(T, source.points)
-    dist, idx = case.target.tree.query(moved, k=1, workers=-1)
+    dist, idx = case.target.tree.query(moved, k=1)
     every = Matches(np.arange(len(moved)), np.asarray(idx), np.asarray(dist))
     m, _ = plane_matches(every, case.target, moved, case.centre, case.configs["gcr"])
 

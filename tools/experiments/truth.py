@@ -32,7 +32,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from simlidar import se3
 
@@ -102,15 +101,16 @@ def truth_of_rows(sidecar: np.ndarray, rows: np.ndarray) -> PointTruth:
     )
 
 
-def truth_of_points(points: np.ndarray, raw_tree: cKDTree, raw_rows: np.ndarray, sidecar: np.ndarray) -> PointTruth:
+def truth_of_points(points: np.ndarray, raw_tree, raw_rows: np.ndarray, sidecar: np.ndarray) -> PointTruth:
     """The truth of ICP points (e.g. voxel centroids) from their nearest raw return.
 
     points: (M, 3) in the frame of the raw points the tree holds, m.
-    raw_tree: k-d tree over the (N', 3) raw points the ICP points were made from.
+    raw_tree: k-d tree (``odometry.kdtree.KDTree`` or scipy's) over the (N', 3) raw points
+        the ICP points were made from.
     raw_rows: (N',) sidecar row of each of those raw points (after range cleaning).
     sidecar: the frame's structured per-point record (``simlidar.sweep.SIDECAR_DTYPE``).
     """
-    dist, idx = raw_tree.query(points, k=1, workers=-1)
+    dist, idx = raw_tree.query(points, k=1)
     t = truth_of_rows(sidecar, np.asarray(raw_rows)[idx])
     return PointTruth(t.object_id, t.true_xyz, t.normal, np.asarray(dist, dtype=np.float64))
 
