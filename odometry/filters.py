@@ -141,18 +141,20 @@ def filter_scan(
     raw_rings: np.ndarray | None = None,
     sensor: LidarModel | None = None,
     raw_times_s: np.ndarray | None = None,
+    with_normals: bool | None = None,
 ) -> FilteredScan:
     """Filter a raw scan (N, 3), as measured or de-skewed, into ICP points with normals (see module doc).
 
     raw_rings: (N,) int ring per point, or None. sensor: the lidar model (its range noise for the
     NCF; its rings and azimuth columns for ``filter.adjacent_ring_reach_m``, which also needs the
     rings), or None. raw_times_s: (N,) firing times, s, or None (the centroids' mean times).
-    When the scan's normals are not needed (``scan_normals_needed``), the ICP points are
-    the voxel centroids themselves, with nan normals, no rings and no raw k-d tree.
+    When the scan's normals are not needed (``scan_normals_needed``, unless ``with_normals``
+    says otherwise), the ICP points are the voxel centroids themselves, with nan normals, no
+    rings and no raw k-d tree.
     """
     seconds: dict[str, float] = {}
     t = time.perf_counter()
-    if not scan_normals_needed(config):
+    if not (scan_normals_needed(config) if with_normals is None else with_normals):
         centroids, centroid_times = (voxel_centroids(raw_points, config.filter.voxel_size_m), None) \
             if raw_times_s is None else voxel_centroids(raw_points, config.filter.voxel_size_m, raw_times_s)
         seconds["voxel"] = time.perf_counter() - t

@@ -295,6 +295,10 @@ class Odometry:
         self._coarse_config = config.replace(gcr={"enabled": False}, match={
             "max_correspondence_distance_m": config.match.initial_correspondence_distance_m, "trim_fraction": 0.0})
         self._chain_coarse = rejectors_for(self._coarse_config)
+        # Against a map, the first registration's target is the first scan with its own normals
+        # (map.cold_start_target: scan): a map of one scan has a normal only where two scan lines
+        # meet, which on open ground leaves the direction of travel to a few objects.
+        self._scan_cold_start = config.match.target == "map" and config.map.cold_start_target == "scan"
 
     @property
     def poses(self) -> list[np.ndarray]:
@@ -354,11 +358,13 @@ class Odometry:
         diag.deskewed = deskewing
         seconds["deskew"] = time.perf_counter() - t
 
+        # (the first scan of a map variant gets its own normals for the cold start: ``_cold_start_target``)
+        normals = scan_normals_needed(cfg) or (self._scan_cold_start and not st.poses)
         rings_needed = cfg.gcr.enabled or cfg.filter.adjacent_ring_reach_m is not None
-        if clean.rings is None and rings_needed and scan_normals_needed(cfg) and self.sensor is not None:
+        if clean.rings is None and rings_needed and normals and self.sensor is not None:
             clean.rings = ring_of_points(clean.points, self.sensor)
         scan = filter_scan(clean.points, cfg, clean.rings, self.sensor,
-                           raw_times_s=clean.times_s if deskewing else None)
+                           raw_times_s=clean.times_s if deskewing else None, with_normals=normals)
         if filter_first:
             t = time.perf_counter()
             redeskew_scan(scan, np.eye(4), T_guess, period)
@@ -410,7 +416,7 @@ class Odometry:
             T_target_prev = np.eye(4)
         else:
             T_target_prev = se3.inverse(st.poses[st.target_frame]) @ T_world_prev
-        target = self._target()
+        target = self._cold_start_target() if first else self._target()
         source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
         T_init = T_target_prev @ T_guess
         prior = not first  # the first registration starts from a guess, not from a known motion
@@ -451,7 +457,7 @@ class Odometry:
                 if st.local_map is not None:
                     st.local_map = new_local_map(cfg, self.sensor)
                     st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
-                target = self._target()
+                target = self._cold_start_target()
             else:
                 M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
             redeskew_scan(scan, T_deskew, M, period)
@@ -516,6 +522,14 @@ class Odometry:
     def _target(self) -> Target:
         st = self.state
         return st.local_map.target() if st.local_map is not None else scan_target(st.target_scan, self.config)
+
+    def _cold_start_target(self) -> Target:
+        """The first registration's target: the first scan's own points and normals (in the world
+        frame, which is its frame) when ``map.cold_start_target`` is scan, else the usual target."""
+        scan = self.state.target_scan
+        if self._scan_cold_start and scan is not None and len(scan.points):
+            return Target(scan.points, scan.tree_of_points(), scan.normals)
+        return self._target()
 
     def _frame_period(self, stamp_s: float | None) -> float:
         st = self.state
