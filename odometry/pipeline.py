@@ -295,9 +295,9 @@ class Odometry:
         self._coarse_config = config.replace(gcr={"enabled": False}, match={
             "max_correspondence_distance_m": config.match.initial_correspondence_distance_m, "trim_fraction": 0.0})
         self._chain_coarse = rejectors_for(self._coarse_config)
-        # Against a map, the first registration's target is the first scan with its own normals
-        # (map.cold_start_target: scan): a map of one scan has a normal only where two scan lines
-        # meet, which on open ground leaves the direction of travel to a few objects.
+        # With map.cold_start_target: scan, a map variant's first registration is against the first
+        # scan's own points and normals: a map of one scan has a normal only where two scan lines
+        # meet, which on open ground leaves the direction of travel to a few objects (README).
         self._scan_cold_start = config.match.target == "map" and config.map.cold_start_target == "scan"
 
     @property
@@ -358,7 +358,7 @@ class Odometry:
         diag.deskewed = deskewing
         seconds["deskew"] = time.perf_counter() - t
 
-        # (the first scan of a map variant gets its own normals for the cold start: ``_cold_start_target``)
+        # (with map.cold_start_target: scan, a map variant's first scan gets its own normals: ``_cold_start_target``)
         normals = scan_normals_needed(cfg) or (self._scan_cold_start and not st.poses)
         rings_needed = cfg.gcr.enabled or cfg.filter.adjacent_ring_reach_m is not None
         if clean.rings is None and rings_needed and normals and self.sensor is not None:
