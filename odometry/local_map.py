@@ -224,8 +224,7 @@ class LocalMap:
             raise ValueError("this map carries a payload: give one with every update")
         added = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload)
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
-        # (compact nodes: the ICP queries this tree a dozen times per frame, and a compact tree answers
-        # them about a quarter faster for a few ms more of building on the background thread)
+        # (built on the background thread while the next scan is cleaned and filtered)
         self._tree = background().submit(KDTree, self.points)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 

@@ -190,6 +190,11 @@ def map_point_spacing_m(config: OdometryConfig) -> float:
     return max(config.map.voxel_size_m / math.sqrt(config.map.points_per_voxel), config.map.min_point_spacing_m)
 
 
+def filtered_scan_target(scan: FilteredScan) -> Target:
+    """A scan's filtered points and their own normals as a target (its own frame): Alg. 1's target."""
+    return Target(scan.points, scan.tree_of_points(), scan.normals)
+
+
 def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
     """A scan as the target of scan-to-scan registration (its own frame).
 
@@ -197,7 +202,7 @@ def scan_target(scan: FilteredScan, config: OdometryConfig) -> Target:
     ``raw``: every de-skewed raw point, normals estimated where matched.
     """
     if config.match.target == "filtered":
-        return Target(scan.points, scan.tree_of_points(), scan.normals)
+        return filtered_scan_target(scan)
     raw, tree, k = scan.raw_points, scan.raw_tree, config.filter.normal_neighbours
 
     def normals_of(rows: np.ndarray) -> tuple[np.ndarray, None]:
@@ -528,7 +533,7 @@ class Odometry:
         frame, which is its frame) when ``map.cold_start_target`` is scan, else the usual target."""
         scan = self.state.target_scan
         if self._scan_cold_start and scan is not None and len(scan.points):
-            return Target(scan.points, scan.tree_of_points(), scan.normals)
+            return filtered_scan_target(scan)
         return self._target()
 
     def _frame_period(self, stamp_s: float | None) -> float:
