@@ -7,6 +7,8 @@ translation.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -67,10 +69,73 @@ def _v_matrix(omega: np.ndarray) -> np.ndarray:
     return np.eye(3) + a * W + b * W2
 
 
+def _rotation_of_rotvec(omega: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector -> (3, 3) rotation (Rodrigues).
+
+    One transform at a time (the odometry's per-iteration updates), scipy's ``Rotation``
+    costs a tenth of a millisecond of call overhead for three lines of arithmetic.
+    """
+    a, b = _jacobian_coefficients(omega)[:2]
+    W = _hat3(omega)
+    return np.eye(3) + a * W + b * (W @ W)
+
+
+def _hat3(w: np.ndarray) -> np.ndarray:
+    """(3,) -> (3, 3) ``hat`` of one vector."""
+    x, y, z = float(w[0]), float(w[1]), float(w[2])
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def _jacobian_coefficients(omega: np.ndarray) -> tuple[float, float, float]:
+    """(3,) rotation vector -> ``sin(t)/t, (1 - cos t)/t^2, (t - sin t)/t^3`` (t = |omega|), series near 0:
+    ``R = I + a W + b W^2`` and ``V = I + b W + c W^2``."""
+    t2 = float(omega @ omega)
+    if t2 < 1e-16:
+        return 1.0 - t2 / 6.0, 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0
+    t = math.sqrt(t2)
+    return math.sin(t) / t, (1.0 - math.cos(t)) / t2, (t - math.sin(t)) / (t2 * t)
+
+
+def _rotvec_of_rotation(R: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation -> (3,) rotation vector, through the unit quaternion (stable at every angle).
+
+    The quaternion's largest component is computed first (Shepperd's method), the others from
+    it; then ``omega = 2 atan2(|v|, w) v / |v|``. One matrix at a time, as ``_rotation_of_rotvec``.
+    """
+    m = R.tolist()
+    diag = (m[0][0], m[1][1], m[2][2])
+    tr = diag[0] + diag[1] + diag[2]
+    if tr >= max(diag):
+        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
+        v = [(m[2][1] - m[1][2]) / (4.0 * w), (m[0][2] - m[2][0]) / (4.0 * w), (m[1][0] - m[0][1]) / (4.0 * w)]
+    else:
+        i = diag.index(max(diag))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        v = [0.0, 0.0, 0.0]
+        v[i] = 0.5 * math.sqrt(max(1.0 + m[i][i] - m[j][j] - m[k][k], 0.0))
+        v[j] = (m[j][i] + m[i][j]) / (4.0 * v[i])
+        v[k] = (m[k][i] + m[i][k]) / (4.0 * v[i])
+        w = (m[k][j] - m[j][k]) / (4.0 * v[i])
+    if w < 0:  # the quaternion of the shorter rotation
+        v, w = [-x for x in v], -w
+    s = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+    f = 2.0 / w if s < 1e-12 else 2.0 * math.atan2(s, w) / s  # (small angle: omega = 2 v (1 + O(s^2)))
+    return np.array([f * v[0], f * v[1], f * v[2]])
+
+
+def _v_matrix_of(omega: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector -> (3, 3) left Jacobian V of SO(3) (``_v_matrix`` of one vector)."""
+    _, b, c = _jacobian_coefficients(omega)
+    W = _hat3(omega)
+    return np.eye(3) + b * W + c * (W @ W)
+
+
 def exp(xi: np.ndarray) -> np.ndarray:
     """(..., 6) twists (rho, omega) -> (..., 4, 4) transforms."""
     xi = np.asarray(xi, dtype=float)
     rho, omega = xi[..., :3], xi[..., 3:]
+    if xi.shape == (6,):
+        return make(_rotation_of_rotvec(omega), _v_matrix_of(omega) @ rho)
     R = Rotation.from_rotvec(omega.reshape(-1, 3)).as_matrix().reshape(omega.shape[:-1] + (3, 3))
     t = np.einsum("...ij,...j->...i", _v_matrix(omega), rho)
     return make(R, t)
@@ -79,6 +144,9 @@ def exp(xi: np.ndarray) -> np.ndarray:
 def log(T: np.ndarray) -> np.ndarray:
     """(..., 4, 4) transforms -> (..., 6) twists (rho, omega)."""
     T = np.asarray(T, dtype=float)
+    if T.shape == (4, 4):
+        omega = _rotvec_of_rotation(T[:3, :3])
+        return np.concatenate([np.linalg.solve(_v_matrix_of(omega), T[:3, 3]), omega])
     R = T[..., :3, :3]
     omega = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(R.shape[:-2] + (3,))
     rho = np.linalg.solve(_v_matrix(omega), T[..., :3, 3][..., None])[..., 0]
