@@ -88,6 +88,9 @@ class FilterParams(_Stage):
         "instead of its farther half (odometry/scan_lines.py; needs the sensor); null: plain kNN (the paper)",
         above=0.0)
     max_curvature: float = param(0.05, "PCL curvature above which a point is discarded", min=0.0)
+    source_voxel_size_m: float | None = param(
+        None, "scan-to-map: the ICP's source keeps one filtered point per voxel of this edge (the first in "
+        "voxel order) while the map takes every voxel centroid; null: every filtered point", above=0.0)
     min_points: int = param(100, "fewer filtered points or matches: the frame is flagged, its pose extrapolated",
                             min=6)
 
@@ -226,6 +229,13 @@ class OdometryConfig(Params):
             if self.ncf.applies_to != "scan" and self.match.target != "map":
                 raise ConfigError(f"'{self.ncf.applies_to}' needs match.target: map (there is no map to judge)",
                                   "ncf.applies_to")
+            source_voxel = self.filter.source_voxel_size_m
+            if source_voxel is not None and self.match.target != "map":
+                raise ConfigError("needs match.target: map (scan-to-scan registers every filtered point against "
+                                  "every filtered point of the previous scan)", "filter.source_voxel_size_m")
+            if source_voxel is not None and source_voxel < self.filter.voxel_size_m:
+                raise ConfigError(f"must be at least filter.voxel_size_m ({source_voxel} < "
+                                  f"{self.filter.voxel_size_m})", "filter.source_voxel_size_m")
         except ConfigError as exc:
             raise exc.at(f"odometry config '{self.name}'") from None
 

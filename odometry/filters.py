@@ -26,6 +26,7 @@ from .kdtree import KDTree
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import knn, neighbourhood_pca
 from .scan_lines import widen_one_ring_neighbourhoods
+from .voxels import first_per_voxel, voxel_centroids
 
 _background: dict[int, ThreadPoolExecutor] = {}
 
@@ -39,27 +40,6 @@ def background() -> ThreadPoolExecutor:
     if pid not in _background:
         _background[pid] = ThreadPoolExecutor(max_workers=1, thread_name_prefix="kdtree")
     return _background[pid]
-
-
-def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray | None = None):
-    """(N, 3) points -> (M, 3) centroids of the points in each occupied cubic voxel.
-
-    Voxels are aligned to the frame's origin; the output is ordered by voxel key
-    (deterministic). With ``values`` (N,), also returns their (M,) mean per voxel
-    (e.g. the firing time of each centroid).
-    """
-    if len(points) == 0:
-        return np.zeros((0, 3)) if values is None else (np.zeros((0, 3)), np.zeros(0))
-    keys = np.floor(points / voxel_size_m).astype(np.int64)
-    # per column: numpy reduces a (N, 3) array along axis 0 about 15x slower
-    keys -= [keys[:, c].min() for c in range(3)]
-    span = [keys[:, c].max() + 1 for c in range(3)]
-    flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
-    _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
-    sums = np.stack([np.bincount(inverse, weights=points[:, c], minlength=len(counts)) for c in range(3)], axis=1)
-    if values is None:
-        return sums / counts[:, None]
-    return sums / counts[:, None], np.bincount(inverse, weights=values, minlength=len(counts)) / counts
 
 
 def curvature_keep(curvature: np.ndarray, max_curvature: float) -> np.ndarray:
@@ -150,8 +130,31 @@ def filter_scan(
     rings), or None. raw_times_s: (N,) firing times, s, or None (the centroids' mean times).
     When the scan's normals are not needed (``scan_normals_needed``, unless ``with_normals``
     says otherwise), the ICP points are the voxel centroids themselves, with nan normals, no
-    rings and no raw k-d tree.
+    rings and no raw k-d tree. With ``filter.source_voxel_size_m`` (scan-to-map), the ICP points
+    are thinned to the first per voxel of that edge; ``centroids``, what the map takes, keep all.
     """
+    scan = _filter_scan(raw_points, config, raw_rings, sensor, raw_times_s, with_normals)
+    if config.filter.source_voxel_size_m is not None:
+        t = time.perf_counter()
+        rows = first_per_voxel(scan.points, config.filter.source_voxel_size_m)
+        scan.points, scan.normals = scan.points[rows], scan.normals[rows]
+        scan.normal_std_rad = scan.normal_std_rad[rows]
+        scan.rings = None if scan.rings is None else scan.rings[rows]
+        scan.times_s = None if scan.times_s is None else scan.times_s[rows]
+        scan.counts["source"] = len(rows)
+        scan.seconds["voxel"] = scan.seconds.get("voxel", 0.0) + time.perf_counter() - t
+    return scan
+
+
+def _filter_scan(
+    raw_points: np.ndarray,
+    config: OdometryConfig,
+    raw_rings: np.ndarray | None = None,
+    sensor: LidarModel | None = None,
+    raw_times_s: np.ndarray | None = None,
+    with_normals: bool | None = None,
+) -> FilteredScan:
+    """``filter_scan`` before the source thinning."""
     seconds: dict[str, float] = {}
     t = time.perf_counter()
     if not (scan_normals_needed(config) if with_normals is None else with_normals):

@@ -35,6 +35,7 @@ from .icp import Target
 from .kdtree import KDTree
 from .ncf import ncf_keep, normal_covariance_along_beams
 from .normals import knn, local_pca
+from .voxels import voxel_centres, voxel_keys
 
 # A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis,
 MIN_PLANE_EXTENT_SIGMAS = 3.0
@@ -44,34 +45,6 @@ MIN_ELEVATION_SPREAD_RAD = np.radians(0.065)
 MIN_BASELINE_M = 0.3
 # The map drops far voxels each time the sensor has moved this far, m.
 PRUNE_STRIDE_M = 5.0
-_KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
-_KEY_OFFSET = 1 << (_KEY_BITS - 1)
-_KEY_MASK = (1 << _KEY_BITS) - 1
-
-
-def voxel_keys(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
-    """(N, 3) points -> (N,) int64 key of the cubic voxel holding each point."""
-    ijk = np.floor(points / voxel_size_m).astype(np.int64) + _KEY_OFFSET
-    if len(ijk) and (ijk.min() < 0 or ijk.max() > _KEY_MASK):
-        raise ValueError(f"points beyond +-{_KEY_OFFSET * voxel_size_m:.3g} m cannot be put in the voxel map")
-    return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
-
-
-_NEIGHBOUR_OFFSETS = np.array([(di << (2 * _KEY_BITS)) + (dj << _KEY_BITS) + dk
-                               for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)], dtype=np.int64)
-
-
-def neighbourhood_keys(keys: np.ndarray) -> np.ndarray:
-    """(K,) voxel keys -> sorted unique keys of those voxels and their 26 neighbours."""
-    return np.unique((keys[:, None] + _NEIGHBOUR_OFFSETS[None, :]).ravel())
-
-
-def voxel_centres(keys: np.ndarray, voxel_size_m: float) -> np.ndarray:
-    """(K,) voxel keys -> (K, 3) centres of the voxels, m."""
-    ijk = np.stack([(keys >> (2 * _KEY_BITS)) & _KEY_MASK, (keys >> _KEY_BITS) & _KEY_MASK, keys & _KEY_MASK], axis=1)
-    return (ijk - _KEY_OFFSET + 0.5) * voxel_size_m
-
-
 def in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
     """(N,) bool: which ``values`` are in the sorted array ``sorted_set`` (faster than np.isin here)."""
     if len(sorted_set) == 0:

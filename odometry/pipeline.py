@@ -226,14 +226,20 @@ def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:
     return se3.transform_points(T_world_lidar, scan.centroids)
 
 
-def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.ndarray, period_s: float) -> None:
-    """Re-do the de-skew of a filtered scan's points, normals and centroids with a better motion (in place)."""
+def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.ndarray, period_s: float,
+                  centroids_motion: np.ndarray | None = None) -> None:
+    """Re-do the de-skew of a filtered scan's points and normals with a better motion (in place).
+
+    The centroids (what a map takes) move with the points when they are the points. Otherwise
+    they move only when ``centroids_motion`` (4, 4), the motion they are de-skewed with now, is
+    given: the de-skew refinements leave them, since only the frame's final motion matters to the map.
+    """
     same = scan.points is scan.centroids  # (the ICP points are the centroids: move them once)
     scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, old_motion, new_motion, period_s)
     if same:
         scan.centroids = scan.points
-    elif scan.centroid_times_s is not None and len(scan.centroids):
-        scan.centroids, _ = redeskew(scan.centroids, None, scan.centroid_times_s, old_motion, new_motion,
+    elif centroids_motion is not None and scan.centroid_times_s is not None and len(scan.centroids):
+        scan.centroids, _ = redeskew(scan.centroids, None, scan.centroid_times_s, centroids_motion, new_motion,
                                      period_s)
 
 
@@ -372,7 +378,7 @@ class Odometry:
                            raw_times_s=clean.times_s if deskewing else None, with_normals=normals)
         if filter_first:
             t = time.perf_counter()
-            redeskew_scan(scan, np.eye(4), T_guess, period)
+            redeskew_scan(scan, np.eye(4), T_guess, period, centroids_motion=np.eye(4))
             seconds["deskew"] += time.perf_counter() - t
         diag.filter_counts = scan.counts
         seconds.update(scan.seconds)
@@ -457,7 +463,7 @@ class Odometry:
                 # re-de-skewed with the estimate too, so source and target share one motion
                 # model and the estimate can be taken as it is.
                 M = motion
-                redeskew_scan(st.target_scan, st.target_motion, M, period)
+                redeskew_scan(st.target_scan, st.target_motion, M, period, centroids_motion=st.target_motion)
                 st.target_motion = M
                 if st.local_map is not None:
                     st.local_map = new_local_map(cfg, self.sensor)
@@ -510,7 +516,7 @@ class Odometry:
         t = time.perf_counter()
         redo = raw_times_s is not None and len(st.poses) > 1
         if redo:
-            redeskew_scan(scan, T_deskew, T, period)
+            redeskew_scan(scan, T_deskew, T, period, centroids_motion=T_guess)  # (the centroids are at T_guess)
             if cfg.match.target == "raw":
                 scan.raw_points, _ = redeskew(scan.raw_points, None, raw_times_s, T_guess, T, period)
                 scan.raw_tree = KDTree(scan.raw_points)

@@ -9,11 +9,12 @@ from helpers import box_room, constant_velocity
 from odometry.config import BL, NCF, SALO, SALO_MAP, ConfigError, config_from_dict, load_config, variant
 from odometry.deskew import deskew, redeskew, screw_apply
 from odometry.estimation import point_to_plane_step
-from odometry.filters import voxel_centroids
+from odometry.filters import filter_scan
 from odometry.icp import Source, Target, converged, register
 from odometry.kdtree import KDTree
 from odometry.pipeline import Odometry, OdometryError
 from odometry.rejectors import Matches, distance_rejector, trimmed_rejector
+from odometry.voxels import first_per_voxel, voxel_centroids
 from simlidar import se3
 from simlidar.sensor import load_preset
 from simlidar.sweep import SweepSimulator
@@ -87,6 +88,33 @@ def test_voxel_centroids():
     order = np.argsort(c[:, 0])
     assert np.allclose(c[order], [[-0.1, 0, 0], [0.2, 0.2, 0.2], [1.2, 0.1, 0.1]])
     assert np.allclose(t[order], [7.0, 2.0, 5.0])
+
+
+def test_first_per_voxel():
+    pts = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.2, 0.1, 0.1], [-0.1, 0.0, 0.0], [1.9, 0.9, 0.5]])
+    assert first_per_voxel(pts, 1.0).tolist() == [0, 2, 3]
+    assert first_per_voxel(pts, 0.25).tolist() == [0, 1, 2, 3, 4]
+    assert first_per_voxel(np.zeros((0, 3)), 1.0).tolist() == []
+
+
+def test_source_thinning_keeps_the_map_points():
+    """filter.source_voxel_size_m thins the ICP source to one point per coarse voxel; the map's centroids stay."""
+    from odometry.config import ConfigError, variant
+
+    rng = np.random.default_rng(3)
+    ground = np.c_[rng.uniform(-20, 20, (20000, 2)), rng.normal(-1.8, 0.01, 20000)]
+    fine = variant("salo-map")
+    coarse = fine.replace(filter={"source_voxel_size_m": 1.0})
+    a, b = filter_scan(ground, fine), filter_scan(ground, coarse)
+    assert np.array_equal(a.centroids, b.centroids) and np.array_equal(a.points, a.centroids)
+    # every source point is one of the centroids, one per occupied 1 m voxel (40 x 40 of them)
+    assert len(b.points) == len(np.unique(np.floor(a.centroids / 1.0), axis=0)) == 1600
+    assert np.isin(b.points.view("f8,f8,f8"), a.centroids.view("f8,f8,f8")).all()
+    assert b.counts["source"] == len(b.points)
+    with pytest.raises(ConfigError, match="match.target: map"):
+        variant("salo").replace(filter={"source_voxel_size_m": 1.0})
+    with pytest.raises(ConfigError, match="at least filter.voxel_size_m"):
+        fine.replace(filter={"source_voxel_size_m": 0.1})
 
 
 def test_deskew_matches_simulator_truth():
@@ -239,3 +267,17 @@ def test_redeskew_points_alone_match_points_with_normals():
     np.testing.assert_array_equal(p_both, p_alone)
     s = t / 0.1
     np.testing.assert_array_equal(n_both, screw_apply(se3.log(new), s, screw_apply(-se3.log(old), s, n, True), True))
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-13, 1e-7, 1e-3, 0.5, 2.0, np.pi - 1e-7])
+def test_se3_of_one_transform_agrees_with_the_batched_scipy_path(angle):
+    """exp and log of a single (4, 4) / (6,) take a path of their own (no scipy Rotation call overhead):
+    they agree with the batched path, which goes through scipy, at every rotation angle."""
+    rng = np.random.default_rng(int(angle * 1000))
+    for _ in range(50):
+        axis = rng.normal(size=3)
+        xi = np.r_[rng.normal(size=3) * 3.0, axis / np.linalg.norm(axis) * angle]
+        T = se3.exp(xi)
+        np.testing.assert_allclose(T, se3.exp(xi[None])[0], rtol=0, atol=1e-14)
+        np.testing.assert_allclose(se3.log(T), se3.log(T[None])[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(se3.log(T), xi, rtol=0, atol=1e-9)

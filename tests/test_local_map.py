@@ -7,7 +7,8 @@ import pytest
 
 from odometry.constraints import remapped_step, restore_constraints
 from odometry.icp import match
-from odometry.local_map import LocalMap, rank_within_groups, voxel_keys
+from odometry.local_map import LocalMap, rank_within_groups
+from odometry.voxels import voxel_keys
 from simlidar import se3
 
 

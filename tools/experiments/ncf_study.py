@@ -124,11 +124,11 @@ class NormalSamples:
 def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max_points: int | None) -> NormalSamples:
     """The normals of frame k's ICP points, their true error and the NCF's predictions."""
     from odometry.deskew import deskew
-    from odometry.filters import voxel_centroids
     from odometry.kdtree import KDTree
     from odometry.ncf import IsotropicNoise, RangeNoise, normal_covariance
     from odometry.normals import angle_between_normals_rad, estimate_normals
     from odometry.pipeline import clean_scan
+    from odometry.voxels import voxel_centroids
 
     from .rejector_study import true_motion
 

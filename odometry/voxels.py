@@ -1,0 +1,53 @@
+"""Cubic voxel grids aligned to the frame's origin: keys, centroids, one point per voxel.
+
+A voxel's key packs its three integer indices into one int64 (``_KEY_BITS`` bits per
+axis), so that sorting keys sorts voxels by x, then y, then z index, and a grid needs
+no bounding box: the scan's voxel grid (``odometry.filters``) and the local map
+(``odometry.local_map``) share it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
+_KEY_OFFSET = 1 << (_KEY_BITS - 1)
+_KEY_MASK = (1 << _KEY_BITS) - 1
+
+
+def voxel_keys(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
+    """(N, 3) points -> (N,) int64 key of the cubic voxel holding each point."""
+    ijk = np.floor(points / voxel_size_m).astype(np.int64) + _KEY_OFFSET
+    if len(ijk) and (ijk.min() < 0 or ijk.max() > _KEY_MASK):
+        raise ValueError(f"points beyond +-{_KEY_OFFSET * voxel_size_m:.3g} m cannot be put in a voxel grid of "
+                         f"{voxel_size_m:g} m")
+    return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
+
+
+def voxel_centres(keys: np.ndarray, voxel_size_m: float) -> np.ndarray:
+    """(K,) voxel keys -> (K, 3) centres of the voxels, m."""
+    ijk = np.stack([(keys >> (2 * _KEY_BITS)) & _KEY_MASK, (keys >> _KEY_BITS) & _KEY_MASK, keys & _KEY_MASK], axis=1)
+    return (ijk - _KEY_OFFSET + 0.5) * voxel_size_m
+
+
+def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray | None = None):
+    """(N, 3) points -> (M, 3) centroids of the points in each occupied cubic voxel.
+
+    The output is ordered by voxel key (by x, then y, then z index: deterministic).
+    With ``values`` (N,), also returns their (M,) mean per voxel (e.g. the firing time
+    of each centroid).
+    """
+    if len(points) == 0:
+        return np.zeros((0, 3)) if values is None else (np.zeros((0, 3)), np.zeros(0))
+    _, inverse, counts = np.unique(voxel_keys(points, voxel_size_m), return_inverse=True, return_counts=True)
+    sums = np.stack([np.bincount(inverse, weights=points[:, c], minlength=len(counts)) for c in range(3)], axis=1)
+    if values is None:
+        return sums / counts[:, None]
+    return sums / counts[:, None], np.bincount(inverse, weights=values, minlength=len(counts)) / counts
+
+
+def first_per_voxel(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
+    """(N, 3) points -> sorted rows of the first point (in row order) in each occupied cubic voxel."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.intp)
+    return np.sort(np.unique(voxel_keys(points, voxel_size_m), return_index=True)[1])
