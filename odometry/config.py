@@ -90,7 +90,8 @@ class FilterParams(_Stage):
     max_curvature: float = param(0.05, "PCL curvature above which a point is discarded", min=0.0)
     source_voxel_size_m: float | None = param(
         None, "scan-to-map: the ICP's source keeps one filtered point per voxel of this edge (the first in "
-        "voxel order) while the map takes every voxel centroid; null: every filtered point", above=0.0)
+        "voxel order) while the map takes every voxel centroid; null: every filtered point (scan-to-scan "
+        "always: its source and target are both every filtered point)", above=0.0)
     min_points: int = param(100, "fewer filtered points or matches: the frame is flagged, its pose extrapolated",
                             min=6)
 
@@ -230,9 +231,6 @@ class OdometryConfig(Params):
                 raise ConfigError(f"'{self.ncf.applies_to}' needs match.target: map (there is no map to judge)",
                                   "ncf.applies_to")
             source_voxel = self.filter.source_voxel_size_m
-            if source_voxel is not None and self.match.target != "map":
-                raise ConfigError("needs match.target: map (scan-to-scan registers every filtered point against "
-                                  "every filtered point of the previous scan)", "filter.source_voxel_size_m")
             if source_voxel is not None and source_voxel < self.filter.voxel_size_m:
                 raise ConfigError(f"must be at least filter.voxel_size_m ({source_voxel} < "
                                   f"{self.filter.voxel_size_m})", "filter.source_voxel_size_m")

@@ -117,11 +117,13 @@ def restore_constraints(points: np.ndarray, normals: np.ndarray, candidates: np.
     kept = kept & candidates
     if n_all == 0 or min_eigenvalue <= 0:
         return kept
+    J_kept = constraint_rows(points[kept], normals[kept], rotation_scale_m)
+    w, V = np.linalg.eigh(J_kept.T @ J_kept / n_all)
+    if w[0] >= min_eigenvalue:  # (the usual case: nothing to restore, and no need for every row's J)
+        return kept
     J = constraint_rows(points, normals, rotation_scale_m)
     H_all = J[candidates].T @ J[candidates] / n_all
     out = kept.copy()
-    H_kept = J[kept].T @ J[kept] / n_all
-    w, V = np.linalg.eigh(H_kept)
     for lam, u in zip(w, V.T, strict=True):
         if lam >= min_eigenvalue:
             break

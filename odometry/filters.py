@@ -134,7 +134,7 @@ def filter_scan(
     are thinned to the first per voxel of that edge; ``centroids``, what the map takes, keep all.
     """
     scan = _filter_scan(raw_points, config, raw_rings, sensor, raw_times_s, with_normals)
-    if config.filter.source_voxel_size_m is not None:
+    if config.filter.source_voxel_size_m is not None and config.match.target == "map":
         t = time.perf_counter()
         rows = first_per_voxel(scan.points, config.filter.source_voxel_size_m)
         scan.points, scan.normals = scan.points[rows], scan.normals[rows]
