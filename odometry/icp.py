@@ -142,18 +142,20 @@ def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndar
         config: its ``degeneracy`` section (``min_constraint_eigenvalue``, ``rotation_scale_m``).
 
     Returns:
-        The kept matches and their counts: {"plane": with a plane, "ncf": of those NCF-sure,
-        "restored": uncertain ones kept}, or {} for a target with fixed normals.
+        The kept matches, carrying their target normals (``Matches.target_normals``), and their
+        counts: {"plane": with a plane, "ncf": of those NCF-sure, "restored": uncertain ones kept},
+        or {} for a target with fixed normals.
     """
+    m.target_normals = target.normals_at(m.target_index)  # (looked up once: the matches carry them on)
     if target.estimate_normals is None:
         return m, {}
-    m = m.select(np.isfinite(target.normals_at(m.target_index)[:, 0]))
+    m = m.select(np.isfinite(m.target_normals[:, 0]))
     counts = {"plane": len(m)}
     if target.uncertain is not None:
         sure = ~target.uncertain[m.target_index]
         keep = sure
         if config.degeneracy.min_constraint_eigenvalue > 0 and not sure.all():
-            keep = restore_constraints(moved[m.source_index] - centre, target.normals_at(m.target_index),
+            keep = restore_constraints(moved[m.source_index] - centre, m.target_normals,
                                        np.ones(len(m), dtype=bool), sure, config.degeneracy.min_constraint_eigenvalue,
                                        config.degeneracy.rotation_scale_m)
         counts["ncf"] = int(sure.sum())
@@ -213,7 +215,7 @@ def register(
             # GCR thresholds from the target's normals at these first matches, turned into the
             # source frame (a point without a match now has no bound: inf, the rejector abstains)
             thr = np.full(len(source.points), np.inf)
-            n_src = target.normals_at(m.target_index) @ T[:3, :3]
+            n_src = m.target_normals @ T[:3, :3]
             thr[m.source_index] = source.gcr_thresholds(source.points[m.source_index], n_src, m.source_index)
             source.gcr_threshold_m = thr
         for reject in rejectors:
@@ -235,7 +237,7 @@ def register(
             E[:3, 3] += E[:3, :3] @ centre - centre
             deviation = se3.log(E)
         step = point_to_plane_step(moved[m.source_index] - centre, target.points[m.target_index] - centre,
-                                   target.normals_at(m.target_index), min_eigenvalue=min_eigenvalue,
+                                   m.target_normals, min_eigenvalue=min_eigenvalue,
                                    rotation_scale_m=config.degeneracy.rotation_scale_m,
                                    mode=config.degeneracy.weak_direction_update, deviation=deviation)
         seconds["estimate"] += time.perf_counter() - t2

@@ -20,17 +20,20 @@ class Matches:
 
     source_index: (m,) rows of the source points; target_index: (m,) rows of the target.
     distance_m: (m,) Euclidean distance between the moved source point and its target point.
+    target_normals: (m, 3) the target's normal at each match, once looked up (None before).
     """
 
     source_index: np.ndarray
     target_index: np.ndarray
     distance_m: np.ndarray
+    target_normals: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.source_index)
 
     def select(self, keep: np.ndarray) -> Matches:
-        return Matches(self.source_index[keep], self.target_index[keep], self.distance_m[keep])
+        normals = None if self.target_normals is None else self.target_normals[keep]
+        return Matches(self.source_index[keep], self.target_index[keep], self.distance_m[keep], normals)
 
 
 Rejector = Callable[[Matches, object], np.ndarray]
