@@ -73,6 +73,9 @@ class DeskewParams(_Stage):
     enabled: bool = param(True, "de-skew with the constant-velocity motion")
     refinements: int = param(2, "after the ICP, redo the de-skew with the frame's own motion and refine, this "
                              "many times (0: the previous motion only)", min=0)
+    refinement_iterations: int | None = param(
+        None, "iteration cap of each refinement's ICP, which starts from the frame's estimate (null: "
+        "icp.max_iterations; 1: one Gauss-Newton step with the re-de-skewed points)", min=1)
 
 
 @dataclass(frozen=True)

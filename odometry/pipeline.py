@@ -306,6 +306,9 @@ class Odometry:
         self._coarse_config = config.replace(gcr={"enabled": False}, match={
             "max_correspondence_distance_m": config.match.initial_correspondence_distance_m, "trim_fraction": 0.0})
         self._chain_coarse = rejectors_for(self._coarse_config)
+        # The de-skew refinements' ICP (deskew.refinement_iterations: a cap on its iterations)
+        capped = config.deskew.refinement_iterations
+        self._refine_config = config if capped is None else config.replace(icp={"max_iterations": capped})
         # With map.cold_start_target: scan, a map variant's first registration is against the first
         # scan's own points and normals: a map of one scan has a normal only where two scan lines
         # meet, which on open ground leaves the direction of travel to a few objects (README).
@@ -476,7 +479,10 @@ class Odometry:
             # The GCR thresholds scale with range and incidence, which a re-de-skew by a
             # few centimetres does not change: they are reused.
             source = Source(scan.points, scan.normals, source.gcr_threshold_m)
-            refined = register(source, target, result.T_target_source, cfg, chain, T_target_prev, prior)
+            refined = register(source, target, result.T_target_source, self._refine_config, chain, T_target_prev,
+                               prior)
+            # (a capped refinement is a fixed number of steps from a converged estimate: it inherits that)
+            refined.converged |= self._refine_config is not cfg and result.converged
             for stage, spent in refined.seconds.items():  # stage times and iterations cover every registration
                 icp_seconds[stage] += spent
             icp_iterations += refined.iterations

@@ -206,3 +206,22 @@ def test_cold_start_on_open_ground_from_rest():
     run = run_sequence(seq, variant(DEFAULT_VARIANT).replace(map={"cold_start_target": "scan"}))
     errors = [np.linalg.norm(run.poses[k, :3, 3] - gt[k, :3, 3]) for k in (1, 2)]
     assert max(errors) < 0.05, errors
+
+
+@pytest.mark.slow
+def test_capped_refinements_take_fewer_iterations_and_stay_on_the_truth(city_sequence):
+    """``deskew.refinement_iterations: 1``: each de-skew refinement is one Gauss-Newton step from the frame's
+    estimate instead of a converged ICP. The frames then take fewer ICP iterations, and the drift
+    against the truth stays as small as with converged refinements."""
+    gt, frames = city_sequence.poses, slice(0, 60)
+    errors, iterations = {}, {}
+    for cap in (None, 1):
+        run = run_sequence(city_sequence, variant(DEFAULT_VARIANT).replace(deskew={"refinement_iterations": cap}),
+                           frames=frames)
+        rel = se3.inverse(gt[0]) @ gt[frames]
+        errors[cap] = float(np.linalg.norm(run.poses[:, :3, 3] - rel[:, :3, 3], axis=1).max())
+        iterations[cap] = np.mean([d.iterations for d in run.diagnostics[1:]])
+        assert np.mean([d.converged for d in run.diagnostics[1:]]) > 0.9
+    assert iterations[1] <= iterations[None] - 1.5, iterations
+    # (measured: 7.1 against 5.2 iterations a frame; largest position error 2.05 against 2.02 cm over 60 frames)
+    assert errors[None] < 0.05 and errors[1] < 1.25 * errors[None] + 0.005, errors
