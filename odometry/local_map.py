@@ -81,12 +81,13 @@ def plane_normals_valid(estimate, noise_std_m: float, max_curvature: float,
     return wide & flat & np.isfinite(estimate.normals).all(axis=1)
 
 
-def spans_two_scan_lines(beams: np.ndarray, origins: np.ndarray,
+def spans_two_scan_lines(elevations_rad: np.ndarray, origins: np.ndarray,
                          min_elevation_spread_rad: float = MIN_ELEVATION_SPREAD_RAD,
                          min_baseline_m: float = MIN_BASELINE_M) -> np.ndarray:
     """(M,) bool: a neighbourhood holds points of more than one scan line.
 
-    beams: (M, k, 3) unit beams that measured the points; origins: (M, k, 3) where from, m.
+    elevations_rad: (M, k) elevation of the beam that measured each point, rad (``beam_elevation_rad``);
+    origins: (M, k, 3) where from, m.
     Points of one ring seen from one place lie on one cone: their best plane contains
     the beams, whatever the surface (a ring on rolling ground gives a normal tilted by
     the ground's curvature along the ring), and motion along the beams, which is what a
@@ -94,10 +95,14 @@ def spans_two_scan_lines(beams: np.ndarray, origins: np.ndarray,
     rings (beam elevations differing by more than ``min_elevation_spread_rad``), or the
     same ring seen from places more than ``min_baseline_m`` apart.
     """
-    elevation = np.arcsin(np.clip(beams[..., 2], -1.0, 1.0))
-    rings = np.ptp(elevation, axis=1) > min_elevation_spread_rad
+    rings = np.ptp(elevations_rad, axis=1) > min_elevation_spread_rad
     places = np.linalg.norm(np.ptp(origins, axis=1), axis=1) > min_baseline_m
     return rings | places
+
+
+def beam_elevation_rad(beams: np.ndarray) -> np.ndarray:
+    """(N, 3) unit beams -> (N,) their elevations, rad."""
+    return np.arcsin(np.clip(beams[:, 2], -1.0, 1.0))
 
 
 @dataclass
@@ -147,6 +152,7 @@ class LocalMap:
         self._keys = np.zeros(0, dtype=np.int64)  # voxel key of each point
         self._beams = np.zeros((0, 3))  # unit direction from the sensor that saw each point
         self._origins = np.zeros((0, 3))  # sensor position of each point's scan
+        self._elevations = np.zeros(0)  # elevation of each point's beam, rad
         self._pruned_at: np.ndarray | None = None  # sensor position at the last pruning
         self.prune_stride_m = float(prune_stride_m)
         self.min_spacing_m = float(min_spacing_m)
@@ -233,7 +239,9 @@ class LocalMap:
         self.points = np.concatenate([self.points, points])
         self._keys = np.concatenate([self._keys, keys])
         beams = points - origin
-        self._beams = np.concatenate([self._beams, beams / np.linalg.norm(beams, axis=1, keepdims=True)])
+        beams /= np.linalg.norm(beams, axis=1, keepdims=True)
+        self._beams = np.concatenate([self._beams, beams])
+        self._elevations = np.concatenate([self._elevations, beam_elevation_rad(beams)])
         self._origins = np.concatenate([self._origins, np.broadcast_to(origin, points.shape)])
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
@@ -261,7 +269,7 @@ class LocalMap:
         drop = in_sorted(self._keys, self._voxel_keys[far])
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
         self.points, self._keys, self._beams = self.points[~drop], self._keys[~drop], self._beams[~drop]
-        self._origins = self._origins[~drop]
+        self._origins, self._elevations = self._origins[~drop], self._elevations[~drop]
         self._normals, self._known, self._uncertain = self._normals[~drop], self._known[~drop], self._uncertain[~drop]
         if self._payload is not None:
             self._payload = self._payload[~drop]
@@ -277,7 +285,7 @@ class LocalMap:
     def target(self) -> Target:
         """The map as a registration target (world frame): a k-d tree over its points and
         normals estimated on demand for the matched points (nan where no plane)."""
-        points, beams, origins = self.points, self._beams, self._origins
+        points, beams, origins, elevations = self.points, self._beams, self._origins, self._elevations
         tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
@@ -290,7 +298,7 @@ class LocalMap:
             est = local_pca(hood, query_points=points[rows])
             n = est.normals.copy()
             valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)
-            valid &= spans_two_scan_lines(hood_beams, origins[nb])
+            valid &= spans_two_scan_lines(elevations[nb], origins[nb])
             n[~valid] = np.nan
             if self.ncf_c_tau_rad2 is None:
                 return n, None
