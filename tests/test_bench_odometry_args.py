@@ -14,6 +14,7 @@ from tools import bench_odometry
     (["--set", "map.min_point_spacing_m=-1"], "map.min_point_spacing_m"),
     (["--methods", "kiss-icp,nope"], "unknown method(s) nope"),
     (["--memory-frames", "-1"], "--memory-frames at least 0"),
+    (["--repeat", "0"], "--repeat at least 1"),
 ])
 def test_bad_arguments_are_named(monkeypatch, capsys, argv, message):
     monkeypatch.setattr(sys, "argv", ["bench_odometry", *argv])

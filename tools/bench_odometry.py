@@ -3,14 +3,16 @@
     python -m tools.bench_odometry                           # 100 frames of the city, salo32 and hdl32e
     python -m tools.bench_odometry --frames 200 --scene suburb --sensors hdl32e
     python -m tools.bench_odometry --methods kiss-icp,salo,default --set map.min_point_spacing_m=0
+    python -m tools.bench_odometry --methods kiss-icp,default,salo --repeat 3   # 3 interleaved rounds, medians
 
 For each sensor the sequence is simulated once into memory (``simlidar.in_memory``,
 motion distortion on, per-point times given: the frames every method gets), then
 every variant of ours (the paper's scan-to-scan BL / NCF / SALO, their scan-to-map
 twins, and the default configuration) and every installed peer (KISS-ICP,
 GenZ-ICP, small_gicp s2m; ``pip install -e '.[peer]'``) runs over the same frames
-in this process, one after the other. Printed per method: frames/s, its time
-against KISS-ICP's (the ratio: below 1 is faster), ms per stage, peak traced
+in this process, one after the other (``--repeat N``: N rounds of that, interleaved,
+and the medians). Printed per method: frames/s, its time against KISS-ICP's in the
+same round (the ratio: below 1 is faster), ms per stage, peak traced
 memory over ``--memory-frames`` frames, and KITTI t_err (over 10-50 m segments on a
 path shorter than 100 m, marked *) so that a speed-up that costs accuracy shows.
 Speed is a ratio measured in the same run: this machine is shared and its
@@ -87,13 +89,18 @@ def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None) -> 
 
 
 def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[str] | None = None,
-          changes: dict | None = None) -> None:
+          changes: dict | None = None, repeat: int = 1) -> None:
+    """Run every method over the same frames ``repeat`` times, interleaved (one round runs each
+    method once), and print one row per method: median frames/s, median over rounds of its time
+    over KISS-ICP's in the same round (a machine whose speed drifts moves both alike), t_err and
+    stage times (ms per frame, median over rounds)."""
     seq = simulate(scene, sensor, frames)
     points = np.mean([len(p) for p in seq.points])
     path_m = float(evaluate_trajectory(seq.poses, seq.poses).path_length_m)
-    print(f"\n## {scene}, {sensor}: {len(seq)} frames, {points:,.0f} points per scan, {path_m:.0f} m")
-    rows = []
-    reference = None
+    print(f"\n## {scene}, {sensor}: {len(seq)} frames, {points:,.0f} points per scan, {path_m:.0f} m"
+          + (f", {repeat} interleaved rounds" if repeat > 1 else ""))
+    cfg = variant(DEFAULT_VARIANT)
+    methods = []  # (label, run() -> (poses, seconds, stages or None))
     for name, spec in PEERS.items():
         if only and name not in only:
             continue
@@ -101,30 +108,44 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
         if reason is not None:
             print(f"{spec.label}: {reason}")
             continue
-        cfg = variant(DEFAULT_VARIANT)
-        run = run_peer(name, seq, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
-        rows.append((spec.label, run.seconds, t_err_pct(seq.poses, run.poses), None, None))
-        if name == REFERENCE_PEER:
-            reference = run.seconds
+
+        def run_a_peer(name=name):
+            run = run_peer(name, seq, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
+            return run.poses, run.seconds, None
+
+        methods.append((spec.label, name, run_a_peer))
     for name in (*OURS, "default"):
         if only and name not in only:
             continue
         v = DEFAULT_VARIANT if name == "default" else name
-        poses, seconds, stages = run_ours(seq, v, changes=changes)
-        label = f"default ({v})" if name == "default" else name
-        rows.append((label, seconds, t_err_pct(seq.poses, poses), stages,
-                     peak_memory_mb(seq, v, memory_frames, changes) if memory_frames > 0 else float("nan")))
+        methods.append((f"default ({v})" if name == "default" else name, v,
+                        lambda v=v: run_ours(seq, v, changes=changes)))
+    seconds = {label: [] for label, _, _ in methods}
+    stages, errors = {}, {}
+    for _ in range(repeat):
+        for label, _, run in methods:
+            poses, spent, per_stage = run()
+            seconds[label].append(spent)
+            errors[label] = t_err_pct(seq.poses, poses)
+            if per_stage is not None:
+                stages.setdefault(label, []).append(per_stage)
+    reference = next((label for label, name, _ in methods if name == REFERENCE_PEER), None)
     header = (f"{'method':18s} {'frames/s':>8s} {'/KISS':>6s} {'t_err %':>8s} {'peak MB':>8s} "
               + " ".join(f"{s:>8s}" for s in (*STAGES, "other")))
     print(header)
-    for label, seconds, t_err, stages, mem in rows:
-        ratio = f"{seconds / reference:6.2f}" if reference else "   n/a"
-        line = f"{label:18s} {len(seq) / seconds:8.1f} {ratio} {t_err[0]:7.3f}{'*' if t_err[1] else ' '} "
-        if stages is None:
+    for label, v, _ in methods:
+        spent = float(np.median(seconds[label]))
+        ratio = (f"{np.median(np.array(seconds[label]) / np.array(seconds[reference])):6.2f}" if reference
+                 else "   n/a")
+        t_err = errors[label]
+        line = f"{label:18s} {len(seq) / spent:8.1f} {ratio} {t_err[0]:7.3f}{'*' if t_err[1] else ' '} "
+        if label not in stages:
             print(line + f"{'':>8s}")
             continue
-        other = 1000 * seconds / len(seq) - sum(stages.values())
-        print(line + f"{mem:8.0f} " + " ".join(f"{stages[s]:8.1f}" for s in STAGES) + f" {other:8.1f}")
+        per_stage = {s: float(np.median([r[s] for r in stages[label]])) for s in STAGES}
+        mem = peak_memory_mb(seq, v, memory_frames, changes) if memory_frames > 0 else float("nan")
+        other = 1000 * spent / len(seq) - sum(per_stage.values())
+        print(line + f"{mem:8.0f} " + " ".join(f"{per_stage[s]:8.1f}" for s in STAGES) + f" {other:8.1f}")
 
 
 def main() -> None:
@@ -132,6 +153,8 @@ def main() -> None:
     ap.add_argument("--scene", default="city")
     ap.add_argument("--sensors", default="salo32,hdl32e", help="comma-separated presets (default salo32,hdl32e)")
     ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--repeat", type=int, default=1, help="rounds, each running every method once (interleaved); "
+                    "medians are printed (default 1)")
     ap.add_argument("--memory-frames", type=int, default=20, help="frames of the peak-memory run (0: none)")
     ap.add_argument("--methods", default="", help="comma-separated subset of the methods (default: all); "
                     "kiss-icp is the ratios' reference")
@@ -142,14 +165,14 @@ def main() -> None:
         changes = changes_from_assignments(args.set)
     except ConfigError as exc:
         ap.error(str(exc))
-    if args.memory_frames < 0 or args.frames < 2:
-        ap.error("--frames must be at least 2 and --memory-frames at least 0")
+    if args.memory_frames < 0 or args.frames < 2 or args.repeat < 1:
+        ap.error("--frames must be at least 2, --memory-frames at least 0 and --repeat at least 1")
     only = {m.strip() for m in args.methods.split(",") if m.strip()} or None
     known = {*PEERS, *OURS, "default"}
     if only and only - known:
         ap.error(f"unknown method(s) {', '.join(sorted(only - known))} (known: {', '.join(sorted(known))})")
     for sensor in args.sensors.split(","):
-        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only, changes)
+        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only, changes, args.repeat)
     print("\n(/KISS: the method's time over KISS-ICP's on the same frames in this run, below 1 = faster; stage "
           "columns: ms per frame, 'other' the rest (cleaning, waiting for a k-d tree); the de-skew includes "
           "the refinements; peak MB: traced allocation peak over the first --memory-frames frames; t_err %: "
