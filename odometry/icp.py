@@ -71,7 +71,7 @@ class Target:
                 if self.uncertain is not None and unsure is not None:
                     self.uncertain[rows] = unsure
                 self.known[rows] = True
-        return self.normals[index]
+        return self.normals.take(index, axis=0)  # (take: the fast gather of rows)
 
 
 @dataclass
@@ -155,7 +155,7 @@ def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndar
         sure = ~target.uncertain[m.target_index]
         keep = sure
         if config.degeneracy.min_constraint_eigenvalue > 0 and not sure.all():
-            keep = restore_constraints(moved[m.source_index] - centre, m.target_normals,
+            keep = restore_constraints(moved.take(m.source_index, axis=0) - centre, m.target_normals,
                                        np.ones(len(m), dtype=bool), sure, config.degeneracy.min_constraint_eigenvalue,
                                        config.degeneracy.rotation_scale_m)
         counts["ncf"] = int(sure.sum())
@@ -236,7 +236,8 @@ def register(
             E = T @ se3.inverse(T_init)
             E[:3, 3] += E[:3, :3] @ centre - centre
             deviation = se3.log(E)
-        step = point_to_plane_step(moved[m.source_index] - centre, target.points[m.target_index] - centre,
+        step = point_to_plane_step(moved.take(m.source_index, axis=0) - centre,
+                                   target.points.take(m.target_index, axis=0) - centre,
                                    m.target_normals, min_eigenvalue=min_eigenvalue,
                                    rotation_scale_m=config.degeneracy.rotation_scale_m,
                                    mode=config.degeneracy.weak_direction_update, deviation=deviation)

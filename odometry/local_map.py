@@ -81,13 +81,14 @@ def plane_normals_valid(estimate, noise_std_m: float, max_curvature: float,
     return wide & flat & np.isfinite(estimate.normals).all(axis=1)
 
 
-def spans_two_scan_lines(elevations_rad: np.ndarray, origins: np.ndarray,
+def spans_two_scan_lines(neighbours: np.ndarray, elevations_rad: np.ndarray, origins: np.ndarray,
                          min_elevation_spread_rad: float = MIN_ELEVATION_SPREAD_RAD,
                          min_baseline_m: float = MIN_BASELINE_M) -> np.ndarray:
     """(M,) bool: a neighbourhood holds points of more than one scan line.
 
-    elevations_rad: (M, k) elevation of the beam that measured each point, rad (``beam_elevation_rad``);
-    origins: (M, k, 3) where from, m.
+    neighbours: (M, k) rows of the points in each neighbourhood;
+    elevations_rad: (N,) elevation of the beam that measured each point, rad (``beam_elevation_rad``);
+    origins: (N, 3) where from, m.
     Points of one ring seen from one place lie on one cone: their best plane contains
     the beams, whatever the surface (a ring on rolling ground gives a normal tilted by
     the ground's curvature along the ring), and motion along the beams, which is what a
@@ -95,9 +96,13 @@ def spans_two_scan_lines(elevations_rad: np.ndarray, origins: np.ndarray,
     rings (beam elevations differing by more than ``min_elevation_spread_rad``), or the
     same ring seen from places more than ``min_baseline_m`` apart.
     """
-    rings = np.ptp(elevations_rad, axis=1) > min_elevation_spread_rad
-    places = np.linalg.norm(np.ptp(origins, axis=1), axis=1) > min_baseline_m
-    return rings | places
+    spans = np.ptp(elevations_rad.take(neighbours), axis=1) > min_elevation_spread_rad
+    # (the places are looked at only where the rings do not already differ: most neighbourhoods span rings)
+    one_ring = np.flatnonzero(~spans)
+    if len(one_ring):
+        spread = np.ptp(origins.take(neighbours[one_ring], axis=0), axis=1)
+        spans[one_ring] = np.linalg.norm(spread, axis=1) > min_baseline_m
+    return spans
 
 
 def beam_elevation_rad(beams: np.ndarray) -> np.ndarray:
@@ -214,14 +219,14 @@ class LocalMap:
             # (the points of one update are a scan's voxel centroids, already spaced by its voxel grid)
             d, _ = self._tree.result().query(points, k=1, distance_upper_bound=self.min_spacing_m)
             new = ~np.isfinite(d)
-            points = points[new]
+            points = np.compress(new, points, axis=0)  # (compress, take: numpy's fast row gathers)
             if payload is not None:
                 payload = payload[new]
             if len(points) == 0:
                 return 0
         keys = voxel_keys(points, self.voxel_size_m)
         order = np.argsort(keys, kind="stable")
-        keys, points = keys[order], points[order]
+        keys, points = keys[order], points.take(order, axis=0)
         if payload is not None:
             payload = payload[order]
         pos = np.searchsorted(self._voxel_keys, keys)
@@ -233,7 +238,7 @@ class LocalMap:
         accept = held + rank_within_groups(keys) < self.max_points_per_voxel
         if not accept.any():
             return 0
-        keys, points = keys[accept], points[accept]
+        keys, points = keys[accept], np.compress(accept, points, axis=0)
         if payload is not None:
             self._payload = np.concatenate([self._payload, payload[accept]])
         self.points = np.concatenate([self.points, points])
@@ -268,11 +273,13 @@ class LocalMap:
             return 0
         drop = in_sorted(self._keys, self._voxel_keys[far])
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
-        self.points, self._keys, self._beams = self.points[~drop], self._keys[~drop], self._beams[~drop]
-        self._origins, self._elevations = self._origins[~drop], self._elevations[~drop]
-        self._normals, self._known, self._uncertain = self._normals[~drop], self._known[~drop], self._uncertain[~drop]
+        kept = np.flatnonzero(~drop)
+        self.points, self._keys, self._beams = (a.take(kept, axis=0) for a in (self.points, self._keys, self._beams))
+        self._origins, self._elevations = self._origins.take(kept, axis=0), self._elevations.take(kept)
+        self._normals, self._known, self._uncertain = (a.take(kept, axis=0)
+                                                       for a in (self._normals, self._known, self._uncertain))
         if self._payload is not None:
-            self._payload = self._payload[~drop]
+            self._payload = self._payload.take(kept)
         return int(drop.sum())
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
@@ -293,12 +300,14 @@ class LocalMap:
             if k < 3:
                 return np.full((len(rows), 3), np.nan), None
             # (a normal's sign does not matter to a point-to-plane residual: r and J flip together)
-            nb = knn(points, points[rows], k, tree=tree)
-            hood, hood_beams = points[nb], beams[nb]  # (len(rows), k, 3), gathered once for every test
-            est = local_pca(hood, query_points=points[rows])
+            # (take: numpy's fast gather of rows; the neighbourhoods are gathered once for every test)
+            at = points.take(rows, axis=0)
+            nb = knn(points, at, k, tree=tree)
+            hood, hood_beams = points.take(nb, axis=0), beams.take(nb, axis=0)  # (len(rows), k, 3)
+            est = local_pca(hood, query_points=at)
             n = est.normals.copy()
             valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)
-            valid &= spans_two_scan_lines(elevations[nb], origins[nb])
+            valid &= spans_two_scan_lines(nb, elevations, origins)
             n[~valid] = np.nan
             if self.ncf_c_tau_rad2 is None:
                 return n, None

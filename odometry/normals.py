@@ -266,7 +266,7 @@ def neighbourhood_pca(
     the normals towards ``viewpoint`` (default: the origin). neighbourhoods: (M, k, 3)
     ``cloud[neighbour_indices]`` when the caller has gathered them already (the NCF needs them too).
     """
-    hoods = cloud[neighbour_indices] if neighbourhoods is None else neighbourhoods
+    hoods = np.take(cloud, neighbour_indices, axis=0) if neighbourhoods is None else neighbourhoods
     est = local_pca(hoods, query_points=query_points, viewpoint=viewpoint)
     return NormalEstimate(
         normals=est.normals,

@@ -32,8 +32,11 @@ class Matches:
         return len(self.source_index)
 
     def select(self, keep: np.ndarray) -> Matches:
-        normals = None if self.target_normals is None else self.target_normals[keep]
-        return Matches(self.source_index[keep], self.target_index[keep], self.distance_m[keep], normals)
+        """The matches where the (m,) bool ``keep`` holds."""
+        # (take of the kept rows: a boolean index of an (m, 3) array is several times slower in numpy)
+        rows = np.flatnonzero(keep)
+        normals = None if self.target_normals is None else self.target_normals.take(rows, axis=0)
+        return Matches(self.source_index.take(rows), self.target_index.take(rows), self.distance_m.take(rows), normals)
 
 
 Rejector = Callable[[Matches, object], np.ndarray]

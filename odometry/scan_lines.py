@@ -96,7 +96,7 @@ def widen_one_ring_neighbourhoods(
         # the first ``half`` filled cells in that order (a stable sort moves empty cells last)
         first = np.argsort(cells < 0, axis=1, kind="stable")[:, :half]
         rows = np.take_along_axis(cells, first, axis=1)
-        reach = np.linalg.norm(cloud[np.maximum(rows, 0)] - q[:, None, :], axis=2).max(axis=1)
+        reach = np.linalg.norm(cloud.take(np.maximum(rows, 0), axis=0) - q[:, None, :], axis=2).max(axis=1)
         reach[(rows < 0).any(axis=1)] = np.inf
         nearer = reach < best_reach
         best_rows[nearer], best_reach[nearer] = rows[nearer], reach[nearer]

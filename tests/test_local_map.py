@@ -7,7 +7,13 @@ import pytest
 
 from odometry.constraints import remapped_step, restore_constraints
 from odometry.icp import match
-from odometry.local_map import LocalMap, rank_within_groups
+from odometry.local_map import (
+    MIN_BASELINE_M,
+    MIN_ELEVATION_SPREAD_RAD,
+    LocalMap,
+    rank_within_groups,
+    spans_two_scan_lines,
+)
 from odometry.voxels import voxel_keys
 from simlidar import se3
 
@@ -116,6 +122,26 @@ def test_map_normals_on_a_plane_but_not_on_a_single_ring():
     assert m._known[found.target_index].all()
     m.update(plane[:5] + 0.001, np.zeros(3))  # nothing added (voxels full) ...
     assert m._known[found.target_index[:2]].all()
+
+
+def test_two_scan_lines_are_two_rings_or_one_ring_seen_from_two_places():
+    """Neighbourhoods of one ring from one place are one scan line; another ring or a far origin makes two."""
+    elevations = np.array([0.0, 0.0, 0.5 * MIN_ELEVATION_SPREAD_RAD, 2.0 * MIN_ELEVATION_SPREAD_RAD])
+    origins = np.array([[0.0, 0.0, 0.0], [0.5 * MIN_BASELINE_M, 0.0, 0.0], [0.0, 0.0, 0.0],
+                        [0.0, 2.0 * MIN_BASELINE_M, 0.0]])
+    neighbours = np.array([
+        [0, 2, 0],  # one ring (elevations within the spread), origins within the baseline
+        [0, 1, 2],  # the same
+        [0, 3, 0],  # two rings
+        [0, 0, 3],  # two rings, and two places
+        [2, 2, 3],  # two rings
+    ])
+    assert spans_two_scan_lines(neighbours, elevations, origins).tolist() == [False, False, True, True, True]
+    # one ring from two places: the same elevation, origins farther apart than the baseline
+    elevations[3] = 0.0
+    assert spans_two_scan_lines(neighbours, elevations, origins).tolist() == [False, False, True, True, True]
+    origins[3] = [0.0, 0.5 * MIN_BASELINE_M, 0.0]
+    assert spans_two_scan_lines(neighbours, elevations, origins).tolist() == [False, False, False, False, False]
 
 
 def test_remapped_step_keeps_the_prior_along_a_weak_direction():
