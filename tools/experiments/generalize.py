@@ -315,10 +315,11 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
         for seq in seqs:
             done(run_sequence_task(seq, params.methods, overrides, params.segment_lengths_m))
     else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
 
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        from tools.worker_pool import spawned_pool
+
+        with spawned_pool(workers) as pool:
             futures = [pool.submit(run_sequence_task, seq, params.methods, overrides, params.segment_lengths_m)
                        for seq in seqs]
             for f in as_completed(futures):

@@ -67,8 +67,9 @@ class InlineExecutor:
 
 
 class LocalExecutor:
-    """``workers`` local processes (``concurrent.futures.ProcessPoolExecutor``, spawned: no state
-    inherited from the driver). Each simulation gets cores / workers Embree threads."""
+    """``workers`` local processes (``tools.worker_pool.spawned_pool``: spawned, no state inherited
+    from the driver). Each simulation gets cores / workers Embree threads, each worker as many
+    OpenMP threads for the odometry's k-d tree queries."""
 
     name = "local"
 
@@ -79,22 +80,23 @@ class LocalExecutor:
         self.sim_threads = max(1, (os.cpu_count() or 1) // workers)
 
     def execute(self, sims, ready, runs, on_done) -> None:
-        import multiprocessing
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
+        from tools.worker_pool import spawned_pool
+
         by_sim = _by_sim(runs)
-        pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
         pending: dict = {}
+        # (on an interrupt the pool cancels what has not started and does not wait)
+        with spawned_pool(self.workers) as pool:
 
-        def submit_runs(key: str, outcome: dict) -> None:
-            for job in by_sim.pop(key, []):
-                try:
-                    pending[pool.submit(run_task, job, outcome)] = ("run", job)
-                except BrokenProcessPool as exc:  # the pool broke earlier: nothing more runs here
-                    on_done(failed_result(job, _died("run", exc)))
+            def submit_runs(key: str, outcome: dict) -> None:
+                for job in by_sim.pop(key, []):
+                    try:
+                        pending[pool.submit(run_task, job, outcome)] = ("run", job)
+                    except BrokenProcessPool as exc:  # the pool broke earlier: nothing more runs here
+                        on_done(failed_result(job, _died("run", exc)))
 
-        try:
             for key, outcome in ready.items():
                 submit_runs(key, outcome)
             for sim in sims:
@@ -116,10 +118,6 @@ class LocalExecutor:
                         submit_runs(job.sim_key, result)
                     else:
                         on_done(result)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown(wait=True)
 
 
 class DaskExecutor:

@@ -1,0 +1,43 @@
+"""Spawned worker pools split the cores' OpenMP threads among their workers."""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import wait
+
+import pytest
+
+from tools.worker_pool import openmp_threads_per_worker, spawned_pool
+
+
+def test_threads_per_worker_share_the_cores():
+    assert openmp_threads_per_worker(2, cores=2) == 1
+    assert openmp_threads_per_worker(1, cores=2) == 2
+    assert openmp_threads_per_worker(3, cores=8) == 2
+    assert openmp_threads_per_worker(4, cores=2) == 1  # never fewer than one
+
+
+def test_workers_inherit_their_share_and_the_driver_keeps_its_environment(monkeypatch):
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    with spawned_pool(2) as pool:
+        seen = pool.submit(os.getenv, "OMP_NUM_THREADS").result()
+    assert seen == str(openmp_threads_per_worker(2))
+    assert "OMP_NUM_THREADS" not in os.environ
+
+
+def test_a_users_thread_count_is_kept(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    with spawned_pool(2) as pool:
+        assert pool.submit(os.getenv, "OMP_NUM_THREADS").result() == "3"
+    assert os.environ["OMP_NUM_THREADS"] == "3"
+
+
+def test_an_error_in_the_driver_cancels_the_pending_tasks(monkeypatch):
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    with pytest.raises(KeyboardInterrupt):
+        with spawned_pool(1) as pool:
+            futures = [pool.submit(os.getenv, "HOME") for _ in range(50)]
+            raise KeyboardInterrupt
+    wait(futures, timeout=60)  # (the pool's manager thread cancels them after the driver has left)
+    assert any(f.cancelled() for f in futures)
+    assert "OMP_NUM_THREADS" not in os.environ
