@@ -477,3 +477,9 @@ def test_an_experiment_stopped_by_bad_input_leaves_no_run_folder(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "no.yaml: cannot read sensor file" in err
     assert not out.exists()
+
+
+def test_panel_labels_go_on_past_z():
+    from tools.experiments.plots import panel_label
+
+    assert [panel_label(i) for i in (0, 1, 25, 26, 27, 51, 52)] == ["a", "b", "z", "aa", "ab", "az", "ba"]

@@ -160,6 +160,16 @@ def _end_inset(ax, gt: np.ndarray, est: dict) -> None:
     ax.indicate_inset_zoom(inset, edgecolor="0.4")
 
 
+def panel_label(i: int) -> str:
+    """The i-th panel's letters, from 0: a, b, ..., z, aa, ab, ... (a grid of every sequence has more than 26)."""
+    label = ""
+    i += 1
+    while i:
+        i, r = divmod(i - 1, 26)
+        label = chr(97 + r) + label
+    return label
+
+
 def trajectory_grid(path, tracks: list, segment_length_m: float = 100.0) -> Path:
     """All sequences side by side, as the paper's Fig. 4: tracks = [(name, gt, est, errs), ...]."""
     n = max(len(tracks), 1)
@@ -171,7 +181,7 @@ def trajectory_grid(path, tracks: list, segment_length_m: float = 100.0) -> Path
         ax = axes[i]
         _draw_tracks(ax, gt, est, None, segment_length_m)
         parts = [f"{k} {v[0]:.2f}" for k, v in errs.items() if math.isfinite(v[0])]
-        ax.set_title(f"{chr(97 + i)}) {name}" + ("\nmu, m/100 m: " + ", ".join(parts) if parts else ""), fontsize=10)
+        ax.set_title(f"{panel_label(i)}) {name}" + ("\nmu, m/100 m: " + ", ".join(parts) if parts else ""), fontsize=10)
     for ax in axes[len(tracks):]:
         ax.set_visible(False)
     handles, labels = axes[0].get_legend_handles_labels()
