@@ -41,6 +41,27 @@ class Source:
 
 
 @dataclass
+class NearestCache:
+    """A target's last searched nearest neighbours, which later queries can reuse without a search.
+
+    points: (M, 3) the query points searched, target frame, m. index: (M,) the nearest target row
+    of each (the target's N where none lay within the bound). clear_m: (M,) no other target point
+    lies closer to that query point than this: the second-nearest distance, or the bound.
+    bound_m: the search's distance bound, m.
+    """
+
+    points: np.ndarray
+    index: np.ndarray
+    clear_m: np.ndarray
+    bound_m: float
+
+
+# Margin of the reuse test, m: far above the rounding of distances of a few hundred metres
+# (1e-13 m), far below any distance that separates two target points.
+_REUSE_MARGIN_M = 1e-9
+
+
+@dataclass
 class Target:
     """The scan registered against: points, a k-d tree over them, and their normals.
 
@@ -51,6 +72,7 @@ class Target:
     marks normals the NCF found too uncertain (a map's): the ICP drops those matches
     unless they are the last evidence of a direction (``odometry.constraints``).
     ``known`` (N,) marks the rows estimated (both may be shared with a map's cache).
+    ``nearest``: the last nearest-neighbour search against it (``match``); its points must not change.
     """
 
     points: np.ndarray
@@ -59,6 +81,7 @@ class Target:
     estimate_normals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]] | None = None
     known: np.ndarray | None = None
     uncertain: np.ndarray | None = None
+    nearest: NearestCache | None = None
 
     def normals_at(self, index: np.ndarray) -> np.ndarray:
         if self.estimate_normals is not None:
@@ -119,10 +142,46 @@ def rejectors_for(config: OdometryConfig) -> list[Rejector]:
 
 
 def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
-    """Nearest target point of each (N, 3) point within ``max_distance_m`` (k-d tree, all cores)."""
-    dist, idx = target.tree.query(points, k=1, distance_upper_bound=max_distance_m)
-    found = np.isfinite(dist)
-    return Matches(np.flatnonzero(found), idx[found], dist[found])
+    """Nearest target point of each (M, 3) point within ``max_distance_m``, m (k-d tree, all cores).
+
+    The ICP's query points move by millimetres from one iteration (or de-skew refinement)
+    to the next, so most keep their nearest target point, and that can be proven without a
+    search: a point moved by ``s`` from where its nearest was found at distance ``d``, with
+    no other target point within ``c`` of it then, is now within ``d + s`` of that one and
+    beyond ``c - s`` of every other. The search (two nearest, for ``c``) is redone only
+    for points where ``d + s < c`` fails or that had no neighbour within the bound. The
+    answer is the search's: the same neighbours and the same distances.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    n = len(target.points)
+    cache = target.nearest
+    if cache is None or cache.bound_m != max_distance_m or len(cache.points) != len(points):
+        cache = target.nearest = NearestCache(points.copy(), np.full(len(points), n, dtype=np.intp),
+                                              np.zeros(len(points)), max_distance_m)
+        redo = np.arange(len(points))
+        dist = np.full(len(points), np.inf)
+    else:
+        shift = np.linalg.norm(points - cache.points, axis=1)
+        was = np.flatnonzero(cache.index < n)
+        # (the distance as the k-d tree computes it, so that a reused match carries the same value)
+        diff = points.take(was, axis=0) - target.points.take(cache.index.take(was), axis=0)
+        d = np.sqrt((diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1]) + diff[:, 2] * diff[:, 2])
+        held = (d + shift.take(was) + _REUSE_MARGIN_M < cache.clear_m.take(was)) & (
+            d + _REUSE_MARGIN_M < max_distance_m)
+        dist = np.full(len(points), np.inf)
+        dist[was[held]] = d[held]
+        keep = np.zeros(len(points), dtype=bool)
+        keep[was[held]] = True
+        redo = np.flatnonzero(~keep)
+    if len(redo):
+        q = points.take(redo, axis=0)
+        d2, i2 = target.tree.query(q, k=2, distance_upper_bound=max_distance_m)
+        dist[redo] = d2[:, 0]
+        cache.points[redo] = q
+        cache.index[redo] = i2[:, 0]
+        cache.clear_m[redo] = np.minimum(d2[:, 1], max_distance_m)
+    found = np.flatnonzero(np.isfinite(dist))
+    return Matches(found, cache.index.take(found), dist.take(found))
 
 
 def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndarray, config: OdometryConfig

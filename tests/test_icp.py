@@ -10,7 +10,7 @@ from odometry.config import BL, NCF, SALO, SALO_MAP, ConfigError, config_from_di
 from odometry.deskew import deskew, redeskew, screw_apply
 from odometry.estimation import point_to_plane_step
 from odometry.filters import filter_scan
-from odometry.icp import Source, Target, converged, register
+from odometry.icp import Source, Target, converged, match, register
 from odometry.kdtree import KDTree
 from odometry.pipeline import Odometry, OdometryError
 from odometry.rejectors import Matches, distance_rejector, trimmed_rejector
@@ -55,6 +55,32 @@ def test_point_to_plane_step_leaves_unconstrained_direction_alone():
     assert step.rank == 3
     assert np.allclose(step.xi[:2], 0.0, atol=1e-12)  # no motion invented along the plane
     assert step.xi[2] == pytest.approx(-0.1)
+
+
+def test_reused_nearest_neighbours_are_the_searched_ones():
+    """match() proves most neighbours from its last search; the answer equals a fresh search's."""
+    rng = np.random.default_rng(4)
+    cloud = rng.uniform(-20, 20, (20000, 3))
+    tree = KDTree(cloud)
+    target = Target(cloud, tree, np.zeros_like(cloud))
+    points = cloud[rng.choice(len(cloud), 3000)] + rng.normal(0, 0.3, (3000, 3))
+    reused = 0
+    for step in (0.0, 0.002, 0.002, 0.05, 0.002, 1.0, 0.0):  # ICP-sized steps, a jump, none
+        points = points + rng.normal(0, step, points.shape)
+        before = None if target.nearest is None else target.nearest.points.copy()
+        got = match(points, target, 1.0)
+        dist, idx = tree.query(points, k=1, distance_upper_bound=1.0)
+        found = np.flatnonzero(np.isfinite(dist))
+        assert np.array_equal(got.source_index, found)
+        assert np.array_equal(got.target_index, idx[found])
+        assert np.array_equal(got.distance_m, dist[found])  # the same values, not merely close
+        if before is not None:
+            reused += int(np.all(target.nearest.points == before, axis=1).sum())
+    assert reused > 3000  # the millimetre steps kept most neighbours without a search
+    match(points[:10], target, 1.0)  # other query points or another bound: a new search
+    assert len(target.nearest.points) == 10
+    match(points[:10], target, 2.0)
+    assert target.nearest.bound_m == 2.0
 
 
 def test_rejectors():
