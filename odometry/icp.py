@@ -150,7 +150,8 @@ def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
     no other target point within ``c`` of it then, is now within ``d + s`` of that one and
     beyond ``c - s`` of every other. The search (two nearest, for ``c``) is redone only
     for points where ``d + s < c`` fails or that had no neighbour within the bound. The
-    answer is the search's: the same neighbours and the same distances.
+    answer is the search's: the same neighbours and the same distances (a point with two
+    target points at one distance is always searched again, and either may be named).
     """
     points = np.asarray(points, dtype=np.float64)
     n = len(target.points)
