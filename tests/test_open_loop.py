@@ -42,6 +42,13 @@ def test_open_loop_state_follows_the_truth_and_keeps_each_estimate(city_frames):
     assert np.max(errors.translation_m) < 0.03
     assert np.max(errors.rotation_deg) < 0.3
     assert np.min(errors.translation_m) > 1e-5
+    # the city constrains every direction, by the truth's normals and by the registrations' own
+    truth = min(d.translation_eigenvalues[0] for d in seq.degeneracy)
+    threshold = variant("salo-map").degeneracy.degenerate_eigenvalue
+    assert truth > threshold
+    np.testing.assert_array_equal(errors.weakest_information,
+                                  [d.translation_eigenvalues[0] for d in run.diagnostics[1:]])
+    assert np.all(errors.weakest_information > threshold)
 
 
 def test_open_loop_errors_measure_a_known_bias(city_frames):
@@ -65,6 +72,7 @@ def test_open_loop_errors_measure_a_known_bias(city_frames):
     marked = open_loop_errors(seq.poses, [Diag(None)] + [Diag(T, k == 3) for k, T in enumerate(short)])
     assert np.isnan(marked.translation_m[3]) and np.isnan(marked.along_m[3])
     assert marked.extrapolated.sum() == 1
+    assert np.isnan(marked.weakest_information).all()  # (these diagnostics carry no eigenvalues)
     with pytest.raises(ValueError, match="11 frame diagnostics for 12 true poses"):
         open_loop_errors(seq.poses, [Diag(None)] + [Diag(T) for T in short[:-1]])
 

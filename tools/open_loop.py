@@ -17,7 +17,13 @@ registration's own error, printed per method over the same frames:
   so compare with the closed-loop t_err before reading the sum as drift;
 - vertical error (z of the sensor frame), cm per frame: mean;
 - rotation error per frame, degrees: median;
-- frames extrapolated (not registered: their errors are left out, their count shown).
+- frames extrapolated (not registered: their errors are left out, their count shown);
+- weakest information: the median over frames of the smallest translational eigenvalue of
+  the registration's information per match (``FrameDiagnostics.translation_eigenvalues``),
+  beside the truth's: the same figure of every return with its true normal, per return
+  (``simlidar.degeneracy``). A method far above the truth constrains the weak direction
+  with normals the scene does not have (noise on one-ring normals: evidence for standing
+  still); far below, it has thrown the scene's evidence away.
 
 The sequence is a generalisation-suite sequence (``salo experiment generalize``), drawn
 for any seed; diagnose on seeds outside the evaluation split. Prints figures; ``--plot``
@@ -43,6 +49,8 @@ class OpenLoopErrors:
     """Per-frame errors of one method's open-loop run (frames 1..F-1).
 
     translation_m, along_m, vertical_m: (F-1,) m; rotation_deg: (F-1,); travelled_m: (F-1,) true motion, m.
+    weakest_information: (F-1,) smallest translational eigenvalue of each registration's information
+    per match (dimensionless, in [0, 1]); nan where the frame was extrapolated.
     extrapolated: (F-1,) bool, frames not registered (too few points, singular, implausible): their
     errors are nan, since their estimate is the guess, which open loop makes the previous true motion.
     along_m is also nan where the frame moved less than ``MIN_MOTION_M``.
@@ -54,6 +62,7 @@ class OpenLoopErrors:
     rotation_deg: np.ndarray
     travelled_m: np.ndarray
     extrapolated: np.ndarray
+    weakest_information: np.ndarray
 
     @property
     def along_bias_pct(self) -> float:
@@ -80,8 +89,10 @@ def open_loop_errors(true_poses: np.ndarray, diagnostics: list) -> OpenLoopError
     with np.errstate(invalid="ignore", divide="ignore"):
         along = np.where(travelled >= MIN_MOTION_M,
                          np.einsum("ij,ij->i", dt, true[:, :3, 3]) / travelled, np.nan)
+    weakest = np.array([np.nan if x else float(np.asarray(getattr(d, "translation_eigenvalues", [np.nan]))[0])
+                        for d, x in zip(diagnostics[1:], extrapolated, strict=True)])
     return OpenLoopErrors(np.linalg.norm(err[:, :3, 3], axis=1), along, dt[:, 2],
-                          np.degrees(se3.rotation_angle(err)), travelled, extrapolated)
+                          np.degrees(se3.rotation_angle(err)), travelled, extrapolated, weakest)
 
 
 def run_open_loop(sequence, true_poses: np.ndarray, method: str, changes: dict | None = None) -> OpenLoopErrors:
@@ -147,15 +158,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f"open_loop: {exc}", file=sys.stderr)
         return 2
     print(f"{spec.name}: {args.frames} frames, open loop (each frame registered against a target from true poses)")
+    truth = np.median([d.translation_eigenvalues[0] for d in sequence.degeneracy])
+    print(f"weakest information of the true normals, per return (median over frames): {truth:.2e}")
     print(f"{'method':14s} {'t err cm':>9s} {'p90':>6s} {'along cm':>9s} {'along %':>8s} {'vert cm':>8s} "
-          f"{'rot deg':>8s} {'extrapolated':>12s}")
+          f"{'rot deg':>8s} {'extrapolated':>12s} {'weakest info':>12s}")
     errors = {}
     for method in methods:
         e = errors[method] = run_open_loop(sequence, sequence.poses, method, changes)
         print(f"{method:14s} {100 * np.nanmedian(e.translation_m):9.2f} "
               f"{100 * np.nanpercentile(e.translation_m, 90):6.2f} {100 * np.nanmean(e.along_m):+9.2f} "
               f"{e.along_bias_pct:+8.2f} {100 * np.nanmean(e.vertical_m):+8.2f} {np.nanmedian(e.rotation_deg):8.3f} "
-              f"{int(e.extrapolated.sum()):12d}")
+              f"{int(e.extrapolated.sum()):12d} {np.nanmedian(e.weakest_information):12.2e}")
     if args.plot:
         plot_along(errors, f"{spec.name}: open-loop along-track error", args.plot)
         print(f"wrote {args.plot}")
