@@ -130,6 +130,10 @@ class MatchParams(_Stage):
     initial_correspondence_distance_m: float = param(
         3.0, "bound of a coarse registration, untrimmed, before a sequence's first (it has no motion to "
         "extrapolate)", above=0.0)
+    cold_start_from_rest: bool = param(
+        False, "scans without per-point times: the first registration refines standing still as well as its coarse "
+        "estimate and keeps standing still where the points facing the difference fit it better "
+        "(odometry/cold_start.py); false: the coarse estimate")
     trim_fraction: float = param(0.2, "drop this fraction of the largest match distances (paper: 0.2)", min=0.0,
                                  below=1.0)
 

@@ -28,6 +28,7 @@ from simlidar.formats.scan_folders import Sequence
 from simlidar.sensor import LidarModel
 from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times
 
+from .cold_start import choose_start
 from .config import OdometryConfig
 from .deskew import deskew, redeskew
 from .filters import FilteredScan, filter_scan, scan_normals_needed
@@ -434,20 +435,28 @@ class Odometry:
         source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
         T_init = T_target_prev @ T_guess
         prior = not first  # the first registration starts from a guess, not from a known motion
+        runs: list[RegistrationResult] = []  # (every registration run: their time and iterations count)
+        result = None
         if first:
             # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
             # the correspondence bound, and the points that see it (few, in a corridor) would be
             # trimmed first. A coarse registration with a wide bound and no trimming comes first.
             coarse = register(source, target, T_init, self._coarse_config, self._chain_coarse, T_target_prev,
                               motion_prior=False)
+            runs.append(coarse)
             if not coarse.singular:
-                T_init = coarse.T_target_source
-        result = register(source, target, T_init, cfg, chain, T_target_prev, prior)
-        icp_seconds, icp_iterations = dict(result.seconds), result.iterations
-        if first:
-            for stage, spent in coarse.seconds.items():
-                icp_seconds[stage] += spent
-            icp_iterations += coarse.iterations
+                result = register(source, target, coarse.T_target_source, cfg, chain, T_target_prev, prior)
+                runs.append(result)
+        # The first frame: standing still, refined, may be the better start (odometry/cold_start.py). Not
+        # with per-point times: both scans are de-skewed as if standing still until the refinements
+        # below re-de-skew them with the estimate, and such scans favour standing still.
+        if result is None or (first and cfg.match.cold_start_from_rest and not deskewing):
+            from_guess = register(source, target, T_init, cfg, chain, T_target_prev, prior)
+            runs.append(from_guess)
+            result = from_guess if result is None else choose_start(
+                source.points, target, from_guess, result, cfg.match.max_correspondence_distance_m)
+        icp_seconds = {stage: sum(r.seconds.get(stage, 0.0) for r in runs) for stage in runs[-1].seconds}
+        icp_iterations = sum(r.iterations for r in runs)
         T_deskew = T_guess
 
         def motion_of(T_target_cur: np.ndarray) -> np.ndarray:
