@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .icp import RegistrationResult, Target
+from .icp import RegistrationResult, Target, match
 
 # The truncation of the cost, in RMS residuals of the better-fitting registration.
 TRUNCATION_RMS = 3.0
@@ -54,16 +54,15 @@ def plane_costs(source_points: np.ndarray, T: np.ndarray, target: Target, direct
     point within ``bound_m``; ``tau^2`` with no neighbour there or no plane (a nan normal).
     """
     moved = source_points @ T[:3, :3].T + T[:3, 3]
-    dist, index = target.tree.query(moved, k=1, distance_upper_bound=bound_m)
-    found = np.flatnonzero(np.isfinite(dist))
+    m = match(moved, target, bound_m)  # (the ICP's own nearest-neighbour search and its cache)
     cost = np.full(len(moved), tau_m * tau_m)
     facing = np.zeros(len(moved))
-    if len(found):
-        rows = index.take(found)
-        normals = target.normals_at(rows)
-        r = np.einsum("ij,ij->i", normals, moved.take(found, axis=0) - target.points.take(rows, axis=0))
-        cost[found] = np.where(np.isfinite(r), np.minimum(r * r, tau_m * tau_m), tau_m * tau_m)
-        facing[found] = np.nan_to_num(np.abs(normals @ direction))
+    if len(m):
+        normals = target.normals_at(m.target_index)
+        r = np.einsum("ij,ij->i", normals,
+                      moved.take(m.source_index, axis=0) - target.points.take(m.target_index, axis=0))
+        cost[m.source_index] = np.where(np.isfinite(r), np.minimum(r * r, tau_m * tau_m), tau_m * tau_m)
+        facing[m.source_index] = np.nan_to_num(np.abs(normals @ direction))
     return cost, facing
 
 
@@ -77,9 +76,10 @@ def choose_start(source_points: np.ndarray, target: Target, at_rest: Registratio
     if at_rest.singular or coarse.singular:
         return coarse if at_rest.singular else at_rest
     d = coarse.T_target_source[:3, 3] - at_rest.T_target_source[:3, 3]
-    if not np.linalg.norm(d) > 0:
+    apart = float(np.linalg.norm(d))
+    if not apart > 0:
         return coarse
-    d = d / np.linalg.norm(d)
+    d = d / apart
     tau = TRUNCATION_RMS * max(min(at_rest.rms_m, coarse.rms_m), 1e-3)
     cost_rest, facing_rest = plane_costs(source_points, at_rest.T_target_source, target, d, bound_m, tau)
     cost_coarse, facing_coarse = plane_costs(source_points, coarse.T_target_source, target, d, bound_m, tau)

@@ -447,9 +447,10 @@ class Odometry:
             if not coarse.singular:
                 result = register(source, target, coarse.T_target_source, cfg, chain, T_target_prev, prior)
                 runs.append(result)
-        # The first frame: standing still, refined, may be the better start (odometry/cold_start.py). Not
-        # with per-point times: both scans are de-skewed as if standing still until the refinements
-        # below re-de-skew them with the estimate, and such scans favour standing still.
+        # From the guess: every later frame; the first when its coarse pass failed, or, with
+        # match.cold_start_from_rest, as a second start (odometry/cold_start.py). Not with per-point
+        # times: both scans are de-skewed as if standing still until the refinements below re-de-skew
+        # them with the estimate, and such scans favour standing still.
         if result is None or (first and cfg.match.cold_start_from_rest and not deskewing):
             from_guess = register(source, target, T_init, cfg, chain, T_target_prev, prior)
             runs.append(from_guess)

@@ -89,8 +89,8 @@ def open_loop_errors(true_poses: np.ndarray, diagnostics: list) -> OpenLoopError
     with np.errstate(invalid="ignore", divide="ignore"):
         along = np.where(travelled >= MIN_MOTION_M,
                          np.einsum("ij,ij->i", dt, true[:, :3, 3]) / travelled, np.nan)
-    weakest = np.array([np.nan if x else float(np.asarray(getattr(d, "translation_eigenvalues", [np.nan]))[0])
-                        for d, x in zip(diagnostics[1:], extrapolated, strict=True)])
+    weakest = np.array([d.translation_eigenvalues[0] for d in diagnostics[1:]], dtype=float)
+    weakest[extrapolated] = np.nan
     return OpenLoopErrors(np.linalg.norm(err[:, :3, 3], axis=1), along, dt[:, 2],
                           np.degrees(se3.rotation_angle(err)), travelled, extrapolated, weakest)
 
