@@ -17,7 +17,8 @@ its size is bounded by the volume, not the time), and a point within
 ``min_spacing_m`` of a map point is not added (the surface is already there);
 points farther than ``max_distance_m`` from the sensor are dropped. A target normal is the PCA
 normal of the target point's ``normal_neighbours`` nearest map points, computed
-only for points that are matched, and only where the neighbourhood is a plane:
+only for points that are matched and kept until a point enters or leaves that
+neighbourhood (within the farthest neighbour's distance), and only where it is a plane:
 it must extend along its second axis well beyond the range noise (points of
 one scan line do not define a plane) and its curvature be below
 ``max_curvature``. Other targets get a nan normal: the ICP drops those matches
@@ -35,7 +36,7 @@ from .icp import Target
 from .kdtree import KDTree
 from .ncf import ncf_keep, normal_covariance_along_beams
 from .normals import knn, local_pca
-from .voxels import voxel_centres, voxel_keys
+from .voxels import neighbour_key_steps, voxel_centres, voxel_keys
 
 # A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis,
 MIN_PLANE_EXTENT_SIGMAS = 3.0
@@ -45,6 +46,7 @@ MIN_ELEVATION_SPREAD_RAD = np.radians(0.065)
 MIN_BASELINE_M = 0.3
 # The map drops far voxels each time the sensor has moved this far, m.
 PRUNE_STRIDE_M = 5.0
+_NEIGHBOUR_KEY_STEPS = neighbour_key_steps()
 def in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
     """(N,) bool: which ``values`` are in the sorted array ``sorted_set`` (faster than np.isin here)."""
     if len(sorted_set) == 0:
@@ -161,10 +163,12 @@ class LocalMap:
         self._pruned_at: np.ndarray | None = None  # sensor position at the last pruning
         self.prune_stride_m = float(prune_stride_m)
         self.min_spacing_m = float(min_spacing_m)
-        # Target normals, estimated when first matched and kept until points arrive nearby:
-        # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed.
+        # Target normals, estimated when first matched and kept while their neighbourhood stands:
+        # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed,
+        # ``_reach2`` the squared distance to the farthest of those neighbours, m^2.
         self._normals = np.zeros((0, 3))
         self._known = np.zeros(0, dtype=bool)
+        self._reach2 = np.zeros(0)
         self._uncertain = np.zeros(0, dtype=bool)  # the NCF's verdict on each estimated normal
         self._voxel_keys = np.zeros(0, dtype=np.int64)  # sorted occupied voxels
         self._voxel_counts = np.zeros(0, dtype=np.int64)
@@ -249,10 +253,10 @@ class LocalMap:
         self._elevations = np.concatenate([self._elevations, beam_elevation_rad(beams)])
         self._origins = np.concatenate([self._origins, np.broadcast_to(origin, points.shape)])
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
+        self._forget_normals_near(points)
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
+        self._reach2 = np.concatenate([self._reach2, np.zeros(len(points))])
         self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
-        # a kNN neighbourhood (< 1 voxel across) of a point next to a changed voxel may have changed
-        self._known[in_sorted(self._keys, np.unique(keys))] = False
         self._recount(np.concatenate([self._voxel_keys, keys]),
                       np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
         return int(len(keys))
@@ -272,15 +276,41 @@ class LocalMap:
         if not far.any():
             return 0
         drop = in_sorted(self._keys, self._voxel_keys[far])
+        dropped_points = self.points[drop]
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
         kept = np.flatnonzero(~drop)
         self.points, self._keys, self._beams = (a.take(kept, axis=0) for a in (self.points, self._keys, self._beams))
         self._origins, self._elevations = self._origins.take(kept, axis=0), self._elevations.take(kept)
-        self._normals, self._known, self._uncertain = (a.take(kept, axis=0)
-                                                       for a in (self._normals, self._known, self._uncertain))
+        self._normals, self._known, self._uncertain, self._reach2 = (
+            a.take(kept, axis=0) for a in (self._normals, self._known, self._uncertain, self._reach2))
         if self._payload is not None:
             self._payload = self._payload.take(kept)
+        # (after the arrays shrink: rows of ``_known`` are rows of the kept points)
+        self._forget_normals_near(dropped_points)
         return int(drop.sum())
+
+    def _forget_normals_near(self, changed: np.ndarray) -> None:
+        """Forget the cached normals whose neighbourhood ``changed`` (K, 3) points entered or left, m.
+
+        A point's k nearest neighbours change exactly when a point arrives closer than the
+        farthest of them, or one of them goes; both are within that reach. Called before the
+        rows of new points are appended (they have no cached normal yet), after dropped ones go.
+        """
+        rows = np.flatnonzero(self._known)
+        if len(rows) == 0 or len(changed) == 0:
+            return
+        # (with a margin for rounding: the farthest neighbour itself may be the one that left)
+        reach = np.sqrt(self._reach2[rows]) * (1 + 1e-9)
+        # A row reaching less than a voxel's edge can meet a changed point only if that point lies
+        # in its voxel or one of the 26 around it: only those rows, and the farther-reaching (about
+        # half of them in a city), are searched; the search, not this selection, is the cost.
+        around = np.unique(np.unique(voxel_keys(changed, self.voxel_size_m))[:, None] + _NEIGHBOUR_KEY_STEPS)
+        search = (reach > self.voxel_size_m) | in_sorted(self._keys.take(rows), around)
+        rows, reach = rows[search], reach[search]
+        if len(rows) == 0:
+            return
+        d, _ = KDTree(changed).query(self.points.take(rows, axis=0), k=1, distance_upper_bound=float(reach.max()))
+        self._known[rows[d <= reach]] = False
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
         """Occupied voxels and their counts from (key, count change) pairs."""
@@ -293,6 +323,7 @@ class LocalMap:
         """The map as a registration target (world frame): a k-d tree over its points and
         normals estimated on demand for the matched points (nan where no plane)."""
         points, beams, origins, elevations = self.points, self._beams, self._origins, self._elevations
+        reach2 = self._reach2  # (the map's array: filled for the rows the ICP estimates)
         tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
@@ -304,6 +335,7 @@ class LocalMap:
             at = points.take(rows, axis=0)
             nb = knn(points, at, k, tree=tree)
             hood, hood_beams = points.take(nb, axis=0), beams.take(nb, axis=0)  # (len(rows), k, 3)
+            reach2[rows] = np.einsum("ij,ij->i", hood[:, -1] - at, hood[:, -1] - at)
             est = local_pca(hood, query_points=at)
             n = est.normals.copy()
             valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)

@@ -24,6 +24,13 @@ def voxel_keys(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
     return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
 
 
+def neighbour_key_steps() -> np.ndarray:
+    """(27,) int64 differences between a voxel's key and the keys of itself and its 26 neighbours."""
+    d = np.array([-1, 0, 1], dtype=np.int64)
+    di, dj, dk = np.meshgrid(d, d, d, indexing="ij")
+    return ((di << (2 * _KEY_BITS)) + (dj << _KEY_BITS) + dk).ravel()
+
+
 def voxel_centres(keys: np.ndarray, voxel_size_m: float) -> np.ndarray:
     """(K,) voxel keys -> (K, 3) centres of the voxels, m."""
     ijk = np.stack([(keys >> (2 * _KEY_BITS)) & _KEY_MASK, (keys >> _KEY_BITS) & _KEY_MASK, keys & _KEY_MASK], axis=1)

@@ -225,3 +225,33 @@ def test_prior_step_blends_data_and_prior_by_their_information():
     # already off the prior by +3 cm in x: the prior pulls back, the data push on
     s2 = remapped_step(H, g, n, 10.0, lam, mode="prior", deviation=np.array([0.03, 0, 0, 0, 0, 0]))
     assert s2.xi[0] == pytest.approx((w_x * truth[0] - lam * 0.03) / (w_x + lam), rel=0.05)
+
+
+def test_map_keeps_a_cached_normal_exactly_while_its_neighbourhood_stands():
+    """After points arrive and far ones are dropped, every normal the map still holds equals one
+    estimated afresh from the map as it is now, and a useful share of them is still held."""
+    rng = np.random.default_rng(7)
+    m = make_map(max_distance_m=9.0, max_points_per_voxel=8, min_spacing_m=0.1)
+
+    def surface_seen_from(x0: float) -> np.ndarray:  # rolling ground ahead of a sensor at (x0, 0, 2)
+        xy = rng.uniform([x0 - 6.0, -6.0], [x0 + 6.0, 6.0], (1500, 2))
+        z = 0.3 * np.sin(0.7 * xy[:, 0]) + 0.2 * np.cos(0.5 * xy[:, 1]) + rng.normal(0, 0.02, len(xy))
+        return np.column_stack([xy, z])
+
+    held, forgotten = 0, 0
+    for step in range(8):
+        sensor = np.array([1.5 * step, 0.0, 2.0])
+        if not m.empty:
+            before = m._known.copy()
+        m.update(surface_seen_from(sensor[0]), sensor)
+        target = m.target()
+        rows = np.flatnonzero(m._known)
+        if step:
+            # (rows of the points still in the map: the pruning keeps their order, new points come last)
+            held, forgotten = held + len(rows), forgotten + int(before.sum()) - len(rows)
+        if len(rows):
+            fresh, _ = target.estimate_normals(rows)
+            np.testing.assert_array_equal(target.normals[rows], fresh)
+        asked = rng.choice(len(m), 600, replace=False)  # the matches of the next registration
+        target.normals_at(asked)
+    assert held > 1000 and forgotten > 100, (held, forgotten)
