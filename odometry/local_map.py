@@ -46,7 +46,9 @@ MIN_ELEVATION_SPREAD_RAD = np.radians(0.065)
 MIN_BASELINE_M = 0.3
 # The map drops far voxels each time the sensor has moved this far, m.
 PRUNE_STRIDE_M = 5.0
+# Key differences from a voxel to itself and its 26 neighbours (the map's normal cache checks them).
 _NEIGHBOUR_KEY_STEPS = neighbour_key_steps()
+
 def in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
     """(N,) bool: which ``values`` are in the sorted array ``sorted_set`` (faster than np.isin here)."""
     if len(sorted_set) == 0:
@@ -165,10 +167,10 @@ class LocalMap:
         self.min_spacing_m = float(min_spacing_m)
         # Target normals, estimated when first matched and kept while their neighbourhood stands:
         # nan where no plane; ``_known`` marks the rows estimated since their neighbourhood changed,
-        # ``_reach2`` the squared distance to the farthest of those neighbours, m^2.
+        # ``_reach`` the distance to the farthest of those neighbours, m.
         self._normals = np.zeros((0, 3))
         self._known = np.zeros(0, dtype=bool)
-        self._reach2 = np.zeros(0)
+        self._reach = np.zeros(0)
         self._uncertain = np.zeros(0, dtype=bool)  # the NCF's verdict on each estimated normal
         self._voxel_keys = np.zeros(0, dtype=np.int64)  # sorted occupied voxels
         self._voxel_counts = np.zeros(0, dtype=np.int64)
@@ -255,7 +257,7 @@ class LocalMap:
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
         self._forget_normals_near(points)
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
-        self._reach2 = np.concatenate([self._reach2, np.zeros(len(points))])
+        self._reach = np.concatenate([self._reach, np.zeros(len(points))])
         self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
         self._recount(np.concatenate([self._voxel_keys, keys]),
                       np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
@@ -276,13 +278,13 @@ class LocalMap:
         if not far.any():
             return 0
         drop = in_sorted(self._keys, self._voxel_keys[far])
-        dropped_points = self.points[drop]
+        dropped_points = np.compress(drop, self.points, axis=0)
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
         kept = np.flatnonzero(~drop)
         self.points, self._keys, self._beams = (a.take(kept, axis=0) for a in (self.points, self._keys, self._beams))
         self._origins, self._elevations = self._origins.take(kept, axis=0), self._elevations.take(kept)
-        self._normals, self._known, self._uncertain, self._reach2 = (
-            a.take(kept, axis=0) for a in (self._normals, self._known, self._uncertain, self._reach2))
+        self._normals, self._known, self._uncertain, self._reach = (
+            a.take(kept, axis=0) for a in (self._normals, self._known, self._uncertain, self._reach))
         if self._payload is not None:
             self._payload = self._payload.take(kept)
         # (after the arrays shrink: rows of ``_known`` are rows of the kept points)
@@ -300,7 +302,7 @@ class LocalMap:
         if len(rows) == 0 or len(changed) == 0:
             return
         # (with a margin for rounding: the farthest neighbour itself may be the one that left)
-        reach = np.sqrt(self._reach2[rows]) * (1 + 1e-9)
+        reach = self._reach[rows] * (1 + 1e-9)
         # A row reaching less than a voxel's edge can meet a changed point only if that point lies
         # in its voxel or one of the 26 around it: only those rows, and the farther-reaching (about
         # half of them in a city), are searched; the search, not this selection, is the cost.
@@ -323,7 +325,7 @@ class LocalMap:
         """The map as a registration target (world frame): a k-d tree over its points and
         normals estimated on demand for the matched points (nan where no plane)."""
         points, beams, origins, elevations = self.points, self._beams, self._origins, self._elevations
-        reach2 = self._reach2  # (the map's array: filled for the rows the ICP estimates)
+        reach = self._reach  # (the map's array: filled for the rows the ICP estimates)
         tree = self._tree.result()
         k = min(self.normal_neighbours, len(points))
 
@@ -335,7 +337,7 @@ class LocalMap:
             at = points.take(rows, axis=0)
             nb = knn(points, at, k, tree=tree)
             hood, hood_beams = points.take(nb, axis=0), beams.take(nb, axis=0)  # (len(rows), k, 3)
-            reach2[rows] = np.einsum("ij,ij->i", hood[:, -1] - at, hood[:, -1] - at)
+            reach[rows] = np.linalg.norm(hood[:, -1] - at, axis=1)  # (knn: nearest first)
             est = local_pca(hood, query_points=at)
             n = est.normals.copy()
             valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)

@@ -238,7 +238,7 @@ def test_map_keeps_a_cached_normal_exactly_while_its_neighbourhood_stands():
         z = 0.3 * np.sin(0.7 * xy[:, 0]) + 0.2 * np.cos(0.5 * xy[:, 1]) + rng.normal(0, 0.02, len(xy))
         return np.column_stack([xy, z])
 
-    held, forgotten = 0, 0
+    held, gone = 0, 0  # normals kept across an update; forgotten, or pruned with their point
     for step in range(8):
         sensor = np.array([1.5 * step, 0.0, 2.0])
         if not m.empty:
@@ -247,11 +247,10 @@ def test_map_keeps_a_cached_normal_exactly_while_its_neighbourhood_stands():
         target = m.target()
         rows = np.flatnonzero(m._known)
         if step:
-            # (rows of the points still in the map: the pruning keeps their order, new points come last)
-            held, forgotten = held + len(rows), forgotten + int(before.sum()) - len(rows)
+            held, gone = held + len(rows), gone + int(before.sum()) - len(rows)
         if len(rows):
             fresh, _ = target.estimate_normals(rows)
             np.testing.assert_array_equal(target.normals[rows], fresh)
         asked = rng.choice(len(m), 600, replace=False)  # the matches of the next registration
         target.normals_at(asked)
-    assert held > 1000 and forgotten > 100, (held, forgotten)
+    assert held > 1000 and gone > 100, (held, gone)
