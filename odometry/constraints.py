@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import constraint_information
+
 
 def constraint_rows(points: np.ndarray, normals: np.ndarray, rotation_scale_m: float) -> np.ndarray:
     """(N, 6) scaled rows ``[n, (p x n) / L]`` of (N, 3) points and unit normals."""
@@ -117,8 +119,10 @@ def restore_constraints(points: np.ndarray, normals: np.ndarray, candidates: np.
     kept = kept & candidates
     if n_all == 0 or min_eigenvalue <= 0:
         return kept
-    J_kept = constraint_rows(points[kept], normals[kept], rotation_scale_m)
-    w, V = np.linalg.eigh(J_kept.T @ J_kept / n_all)
+    H_kept = constraint_information(np.ascontiguousarray(points, dtype=np.float64),
+                                    np.ascontiguousarray(normals, dtype=np.float64), np.flatnonzero(kept),
+                                    float(rotation_scale_m))
+    w, V = np.linalg.eigh(H_kept / n_all)
     if w[0] >= min_eigenvalue:  # (the usual case: nothing to restore, and no need for every row's J)
         return kept
     J = constraint_rows(points, normals, rotation_scale_m)

@@ -14,6 +14,8 @@ import numpy as np
 
 from simlidar import se3
 
+from .kernels import screw_motion
+
 
 def screw_apply(xi: np.ndarray, s: np.ndarray, points: np.ndarray, rotate_only: bool = False) -> np.ndarray:
     """Apply ``exp(s_i xi)`` to each point p_i, without forming a matrix per point.
@@ -32,44 +34,21 @@ def screw_apply(xi: np.ndarray, s: np.ndarray, points: np.ndarray, rotate_only: 
 def _screw(xi: np.ndarray, s: np.ndarray, points: np.ndarray | None, normals: np.ndarray | None
            ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """``screw_apply`` of (N, 3) points and the rotation alone of (N, 3) normals (either may be None),
-    the per-point angles' sines and cosines computed once for both."""
-    rho, omega = xi[:3], xi[3:]
-    theta = float(np.linalg.norm(omega))
-    s = np.asarray(s, dtype=np.float64)
-    if theta < 1e-12:
-        return (None if points is None else points + np.outer(s, rho),
-                None if normals is None else normals.copy())
-    k = omega / theta
-    phi = s * theta
-    c, sn = np.cos(phi), np.sin(phi)
-    n_out = None if normals is None else _rotate(k, c, sn, normals)
-    if points is None:
-        return None, n_out
-    out = _rotate(k, c, sn, points)
-    # t(s) = V(s omega) s rho = s rho + s (1 - cos phi)/phi (k x rho) + s (phi - sin phi)/phi k x (k x rho)
-    small = phi < 1e-6
-    phi_safe = np.where(small, 1.0, phi)
-    a = s * np.where(small, phi / 2.0, (1.0 - c) / phi_safe)
-    b = s * np.where(small, phi**2 / 6.0, (phi - sn) / phi_safe)
-    k_rho = np.cross(k, rho)
-    kk_rho = np.cross(k, k_rho)
-    for i in range(3):
-        out[:, i] += s * rho[i] + a * k_rho[i] + b * kk_rho[i]
-    return out, n_out
+    in one compiled pass (``odometry.kernels.screw_motion``)."""
+    xi = np.asarray(xi, dtype=np.float64)
+    s = np.ascontiguousarray(s, dtype=np.float64)
+    if points is None:  # (the rotation alone: a twist without translation moves nothing else)
+        rotated, _ = screw_motion(np.concatenate([np.zeros(3), xi[3:]]), s, _rows(normals), _NO_ROWS)
+        return None, rotated
+    moved, n_out = screw_motion(xi, s, _rows(points), _NO_ROWS if normals is None else _rows(normals))
+    return moved, None if normals is None else n_out
 
 
-def _rotate(k: np.ndarray, c: np.ndarray, sn: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N, 3) points rotated about the unit axis k (3,) by angles of cosines c and sines sn (N,)."""
-    x, y, z = points[:, 0], points[:, 1], points[:, 2]
-    # Rodrigues, per component (skinny matmuls are slow in numpy):
-    # R p = c p + sn (k x p) + (1 - c)(k . p) k
-    kx, ky, kz = k
-    w = (kx * x + ky * y + kz * z) * (1.0 - c)
-    out = np.empty_like(points)
-    out[:, 0] = c * x + sn * (ky * z - kz * y) + w * kx
-    out[:, 1] = c * y + sn * (kz * x - kx * z) + w * ky
-    out[:, 2] = c * z + sn * (kx * y - ky * x) + w * kz
-    return out
+_NO_ROWS = np.zeros((0, 3))
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
 
 
 def deskew(points: np.ndarray, times_s: np.ndarray, motion_per_frame: np.ndarray, frame_period_s: float) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 from simlidar import se3
 
 from .constraints import remapped_step
+from .kernels import plane_normal_equations
 
 
 @dataclass
@@ -54,10 +55,9 @@ def point_to_plane_step(source: np.ndarray, target: np.ndarray, target_normals: 
     ``mode="prior"``, held to the prior by a motion prior of that information per match
     (``deviation``: the current estimate's offset from it, (6,) twist).
     """
-    r = np.einsum("ij,ij->i", target_normals, source - target)
-    J = np.hstack([target_normals, np.cross(source, target_normals)])
-    H = J.T @ J
-    g = J.T @ r
-    solve = remapped_step(H, g, len(r), rotation_scale_m, min_eigenvalue, rcond, mode, deviation)
-    return PlaneStep(se3.exp(solve.xi), solve.xi, H, solve.rank,
-                     float(np.sqrt(np.mean(r**2))) if len(r) else 0.0, solve.remapped)
+    n = len(source)
+    H, g, sum_r2 = plane_normal_equations(*(np.ascontiguousarray(a, dtype=np.float64)
+                                            for a in (source, target, target_normals)))
+    solve = remapped_step(H, g, n, rotation_scale_m, min_eigenvalue, rcond, mode, deviation)
+    return PlaneStep(se3.exp(solve.xi), solve.xi, H, solve.rank, float(np.sqrt(sum_r2 / n)) if n else 0.0,
+                     solve.remapped)

@@ -20,6 +20,7 @@ from .config import OdometryConfig
 from .constraints import restore_constraints, weakest_translation
 from .estimation import point_to_plane_step
 from .kdtree import KDTree
+from .kernels import reusable_matches
 from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
 
 
@@ -162,18 +163,9 @@ def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
         redo = np.arange(len(points))
         dist = np.full(len(points), np.inf)
     else:
-        shift = np.linalg.norm(points - cache.points, axis=1)
-        was = np.flatnonzero(cache.index < n)
         # (the distance as the k-d tree computes it, so that a reused match carries the same value)
-        diff = points.take(was, axis=0) - target.points.take(cache.index.take(was), axis=0)
-        d = np.sqrt((diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1]) + diff[:, 2] * diff[:, 2])
-        held = (d + shift.take(was) + _REUSE_MARGIN_M < cache.clear_m.take(was)) & (
-            d + _REUSE_MARGIN_M < max_distance_m)
-        dist = np.full(len(points), np.inf)
-        dist[was[held]] = d[held]
-        keep = np.zeros(len(points), dtype=bool)
-        keep[was[held]] = True
-        redo = np.flatnonzero(~keep)
+        dist, redo = reusable_matches(np.ascontiguousarray(points), cache.points, cache.index, cache.clear_m,
+                                      target.points, float(max_distance_m), _REUSE_MARGIN_M)
     if len(redo):
         q = points.take(redo, axis=0)
         d2, i2 = target.tree.query(q, k=2, distance_upper_bound=max_distance_m)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kdtree import KDTree
+from .kernels import eigh3_closed_form, neighbourhood_scatter
 
 
 @dataclass(frozen=True)
@@ -89,19 +90,16 @@ def symmetric_eigh_descending(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Returns (w (M, 3), V (M, 3, 3)) with ``A = V diag(w) V^T``, columns of V the
     eigenvectors, ``det V = +1``; nan for matrices with non-finite entries.
 
-    Closed form, vectorised (several times faster than a LAPACK call per
-    matrix): the eigenvalues from the trigonometric solution of the
+    Closed form, compiled (``odometry.kernels.eigh3_closed_form``; several times faster
+    than a LAPACK call per matrix): the eigenvalues from the trigonometric solution of the
     characteristic cubic; v_2 (smallest) as the longest cross product of two
     rows of ``A - lambda_2 I``; v_0, v_1 from the 2 x 2 problem in the plane
     orthogonal to v_2. Matrices whose two smallest eigenvalues are closer than
     ``_CLOSED_FORM_MIN_REL_GAP * lambda_0`` are passed to ``numpy.linalg.eigh``.
     """
-    A = np.asarray(A, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        w, V = _eigh3_closed_form(A)
-        redo = ~((w[:, 1] - w[:, 2]) > _CLOSED_FORM_MIN_REL_GAP * np.abs(w[:, 0]))
-        redo |= ~np.isfinite(w).all(axis=1) | ~np.isfinite(V).all(axis=(1, 2))
-    if np.any(redo):
+    A = np.ascontiguousarray(A, dtype=np.float64)
+    w, V, redo = eigh3_closed_form(A, _CLOSED_FORM_MIN_REL_GAP)
+    if redo.any():
         finite = np.isfinite(A).all(axis=(1, 2))
         lap = redo & finite
         w[redo] = np.nan
@@ -113,52 +111,6 @@ def symmetric_eigh_descending(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             w[lap] = w_l[..., ::-1]
             V[lap] = V_l
     return w, V
-
-
-def _eigh3_closed_form(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unguarded closed-form eigen-decomposition of (M, 3, 3) symmetric matrices (descending)."""
-    a00, a01, a02 = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
-    a11, a12, a22 = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
-    # Eigenvalues: A = q I + p B with tr B = 0, |B| normalised; det B / 2 = cos(3 phi).
-    q = (a00 + a11 + a22) / 3.0
-    b00, b11, b22 = a00 - q, a11 - q, a22 - q
-    p = np.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
-    det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
-    r = np.where(p > 0, np.clip(det / (2.0 * p**3), -1.0, 1.0), 0.0)
-    phi = np.arccos(r) / 3.0
-    lam2 = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
-    # v_2 spans the null space of A - lambda_2 I: the longest cross product of two rows.
-    r0 = np.stack([a00 - lam2, a01, a02], axis=1)
-    r1 = np.stack([a01, a11 - lam2, a12], axis=1)
-    r2 = np.stack([a02, a12, a22 - lam2], axis=1)
-    c = np.stack([np.cross(r0, r1), np.cross(r0, r2), np.cross(r1, r2)], axis=1)
-    cn = np.einsum("mij,mij->mi", c, c)
-    best = np.argmax(cn, axis=1)
-    rows = np.arange(len(A))
-    v2 = c[rows, best] / np.sqrt(cn[rows, best])[:, None]
-    # An orthonormal basis (e1, e2) of the plane orthogonal to v_2, then the 2 x 2 problem there.
-    use_x = np.abs(v2[:, 0]) > np.abs(v2[:, 1])
-    zero = np.zeros_like(q)
-    e1 = np.where(
-        use_x[:, None],
-        np.stack([-v2[:, 2], zero, v2[:, 0]], axis=1),
-        np.stack([zero, v2[:, 2], -v2[:, 1]], axis=1),
-    )
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(v2, e1)
-    Ae1 = np.einsum("mij,mj->mi", A, e1)
-    Ae2 = np.einsum("mij,mj->mi", A, e2)
-    m00 = np.einsum("mi,mi->m", e1, Ae1)
-    m01 = np.einsum("mi,mi->m", e2, Ae1)
-    m11 = np.einsum("mi,mi->m", e2, Ae2)
-    theta = 0.5 * np.arctan2(2.0 * m01, m00 - m11)
-    v0 = np.cos(theta)[:, None] * e1 + np.sin(theta)[:, None] * e2
-    v1 = np.cross(v2, v0)  # so that v_0 = v_1 x v_2
-    half = 0.5 * (m00 + m11)
-    rad = np.hypot(0.5 * (m00 - m11), m01)
-    lam2_rq = np.einsum("mi,mij,mj->m", v2, A, v2)  # Rayleigh quotient: more accurate than the cubic
-    w = np.stack([half + rad, half - rad, lam2_rq], axis=1)
-    return w, np.stack([v0, v1, v2], axis=2)
 
 
 def local_pca(
@@ -181,10 +133,7 @@ def local_pca(
     if P.ndim != 3 or P.shape[2] != 3 or P.shape[1] < 3:
         raise ValueError(f"neighbourhoods must be (M, k, 3) with k >= 3, got {P.shape}")
     k = P.shape[1]
-    mean = np.einsum("mki->mi", P) / k  # (einsum: several times faster than mean over axis 1)
-    D = P - mean[:, None, :]
-    # (a contiguous D^T first: a batched matmul of the strided transpose is twice as slow, same result)
-    scatter = np.matmul(np.ascontiguousarray(D.transpose(0, 2, 1)), D)
+    mean, scatter = neighbourhood_scatter(np.ascontiguousarray(P))
     lam, V = symmetric_eigh_descending(scatter)
     q = mean if query_points is None else np.asarray(query_points, dtype=np.float64)
     vp = np.zeros(3) if viewpoint is None else np.asarray(viewpoint, dtype=np.float64)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels import group_sorted, packed_voxel_keys, voxel_sums
+
 _KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
 _KEY_MASK = (1 << _KEY_BITS) - 1
@@ -17,11 +19,12 @@ _KEY_MASK = (1 << _KEY_BITS) - 1
 
 def voxel_keys(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
     """(N, 3) points -> (N,) int64 key of the cubic voxel holding each point."""
-    ijk = np.floor(points / voxel_size_m).astype(np.int64) + _KEY_OFFSET
-    if len(ijk) and (ijk.min() < 0 or ijk.max() > _KEY_MASK):
-        raise ValueError(f"points beyond +-{_KEY_OFFSET * voxel_size_m:.3g} m cannot be put in a voxel grid of "
-                         f"{voxel_size_m:g} m")
-    return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
+    keys, inside = packed_voxel_keys(np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3),
+                                     float(voxel_size_m), _KEY_BITS)
+    if not inside:
+        raise ValueError(f"points beyond +-{_KEY_OFFSET * voxel_size_m:.3g} m (or not finite) cannot be put in a "
+                         f"voxel grid of {voxel_size_m:g} m")
+    return keys
 
 
 def neighbour_key_steps() -> np.ndarray:
@@ -46,11 +49,14 @@ def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray 
     """
     if len(points) == 0:
         return np.zeros((0, 3)) if values is None else (np.zeros((0, 3)), np.zeros(0))
-    _, inverse, counts = np.unique(voxel_keys(points, voxel_size_m), return_inverse=True, return_counts=True)
-    sums = np.stack([np.bincount(inverse, weights=points[:, c], minlength=len(counts)) for c in range(3)], axis=1)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    keys = voxel_keys(points, voxel_size_m)
+    voxels, slot = group_sorted(keys, np.argsort(keys))
+    v = np.zeros(0) if values is None else np.ascontiguousarray(values, dtype=np.float64)
+    sums, value_sums, counts = voxel_sums(slot, len(voxels), points, v)
     if values is None:
         return sums / counts[:, None]
-    return sums / counts[:, None], np.bincount(inverse, weights=values, minlength=len(counts)) / counts
+    return sums / counts[:, None], value_sums / counts
 
 
 def first_per_voxel(points: np.ndarray, voxel_size_m: float) -> np.ndarray:

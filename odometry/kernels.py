@@ -1,0 +1,328 @@
+"""Compiled inner loops of the odometry (numba): one pass over the rows where numpy needs a dozen.
+
+The odometry's per-frame arrays are thousands of rows, not millions: a numpy
+expression over them costs more in its calls and temporaries than in its
+arithmetic (a frame of the default makes about 12,000 numpy calls). These
+kernels fuse the few hottest chains into one loop each; each one's docstring
+names the numpy expression it computes (the tests compare them). Compiled on
+first use and cached beside this file (``cache=True``), so a process pays the
+compilation once per machine, not per run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def plane_normal_equations(source: np.ndarray, target: np.ndarray, normals: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(H (6, 6), g (6,), sum of r^2) of point-to-plane matches.
+
+    source p, target q, normals n: (N, 3) matched points (m) and unit target normals.
+    With r = n . (p - q) and J = [n, p x n]: ``H = J^T J``, ``g = J^T r``
+    (``odometry.estimation.point_to_plane_step``'s system).
+    """
+    H = np.zeros((6, 6))
+    g = np.zeros(6)
+    rr = 0.0
+    J = np.empty(6)
+    for i in range(source.shape[0]):
+        px, py, pz = source[i, 0], source[i, 1], source[i, 2]
+        qx, qy, qz = target[i, 0], target[i, 1], target[i, 2]
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        r = nx * (px - qx) + ny * (py - qy) + nz * (pz - qz)
+        J[0], J[1], J[2] = nx, ny, nz
+        J[3], J[4], J[5] = py * nz - pz * ny, pz * nx - px * nz, px * ny - py * nx
+        for a in range(6):
+            g[a] += J[a] * r
+            for b in range(a, 6):
+                H[a, b] += J[a] * J[b]
+        rr += r * r
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    return H, g, rr
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def constraint_information(points: np.ndarray, normals: np.ndarray, rows: np.ndarray, rotation_scale_m: float
+                           ) -> np.ndarray:
+    """(6, 6) ``J^T J`` of the scaled rows ``J = [n, (p x n) / L]`` of points ``rows`` (int (K,)).
+
+    points, normals: (M, 3) m and unit; the sum of ``odometry.constraints.constraint_rows``' outer products.
+    """
+    H = np.zeros((6, 6))
+    J = np.empty(6)
+    inv_L = 1.0 / rotation_scale_m
+    for i in rows:
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        J[0], J[1], J[2] = nx, ny, nz
+        J[3], J[4], J[5] = (py * nz - pz * ny) * inv_L, (pz * nx - px * nz) * inv_L, (px * ny - py * nx) * inv_L
+        for a in range(6):
+            for b in range(a, 6):
+                H[a, b] += J[a] * J[b]
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    return H
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def eigh3_closed_form(A: np.ndarray, min_rel_gap: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closed-form eigen-decomposition of (M, 3, 3) symmetric matrices, descending.
+
+    Returns (w (M, 3), V (M, 3, 3), columns the eigenvectors, v_0 = v_1 x v_2, and (M,) bool
+    ``unsure``: the answer is not to be trusted, because the two smallest eigenvalues are closer
+    than ``min_rel_gap * |lambda_0|`` (where the closed form loses digits) or a value is not finite.
+    ``odometry.normals.symmetric_eigh_descending`` sends those to LAPACK.
+    Method: eigenvalues from the trigonometric solution of the characteristic cubic; v_2 the
+    longest cross product of two rows of ``A - lambda_2 I``; v_0, v_1 from the 2 x 2 problem in
+    the plane orthogonal to v_2; lambda_2 refined as the Rayleigh quotient of v_2.
+    """
+    m = A.shape[0]
+    w = np.empty((m, 3))
+    V = np.empty((m, 3, 3))
+    unsure = np.zeros(m, dtype=np.bool_)
+    for i in range(m):
+        a00, a01, a02 = A[i, 0, 0], A[i, 0, 1], A[i, 0, 2]
+        a11, a12, a22 = A[i, 1, 1], A[i, 1, 2], A[i, 2, 2]
+        q = (a00 + a11 + a22) / 3.0
+        b00, b11, b22 = a00 - q, a11 - q, a22 - q
+        p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
+        det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
+        r = min(max(det / (2.0 * p**3), -1.0), 1.0) if p > 0 else 0.0
+        phi = math.acos(r) / 3.0
+        lam2 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+        # rows of A - lambda_2 I and their three cross products; the longest spans the null space
+        r0x, r0y, r0z = a00 - lam2, a01, a02
+        r1x, r1y, r1z = a01, a11 - lam2, a12
+        r2x, r2y, r2z = a02, a12, a22 - lam2
+        c0x, c0y, c0z = r0y * r1z - r0z * r1y, r0z * r1x - r0x * r1z, r0x * r1y - r0y * r1x
+        c1x, c1y, c1z = r0y * r2z - r0z * r2y, r0z * r2x - r0x * r2z, r0x * r2y - r0y * r2x
+        c2x, c2y, c2z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
+        n0, n1, n2 = c0x * c0x + c0y * c0y + c0z * c0z, c1x * c1x + c1y * c1y + c1z * c1z, c2x * c2x + c2y * c2y + c2z * c2z
+        if n0 >= n1 and n0 >= n2:
+            s = math.sqrt(n0)
+            v2x, v2y, v2z = c0x / s, c0y / s, c0z / s
+        elif n1 >= n2:
+            s = math.sqrt(n1)
+            v2x, v2y, v2z = c1x / s, c1y / s, c1z / s
+        else:
+            s = math.sqrt(n2)
+            v2x, v2y, v2z = c2x / s, c2y / s, c2z / s
+        # an orthonormal basis (e1, e2) of the plane orthogonal to v_2
+        if abs(v2x) > abs(v2y):
+            e1x, e1y, e1z = -v2z, 0.0, v2x
+        else:
+            e1x, e1y, e1z = 0.0, v2z, -v2y
+        s = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+        e1x, e1y, e1z = e1x / s, e1y / s, e1z / s
+        e2x, e2y, e2z = v2y * e1z - v2z * e1y, v2z * e1x - v2x * e1z, v2x * e1y - v2y * e1x
+        A1x = a00 * e1x + a01 * e1y + a02 * e1z
+        A1y = a01 * e1x + a11 * e1y + a12 * e1z
+        A1z = a02 * e1x + a12 * e1y + a22 * e1z
+        A2x = a00 * e2x + a01 * e2y + a02 * e2z
+        A2y = a01 * e2x + a11 * e2y + a12 * e2z
+        A2z = a02 * e2x + a12 * e2y + a22 * e2z
+        m00 = e1x * A1x + e1y * A1y + e1z * A1z
+        m01 = e2x * A1x + e2y * A1y + e2z * A1z
+        m11 = e2x * A2x + e2y * A2y + e2z * A2z
+        theta = 0.5 * math.atan2(2.0 * m01, m00 - m11)
+        ct, st = math.cos(theta), math.sin(theta)
+        v0x, v0y, v0z = ct * e1x + st * e2x, ct * e1y + st * e2y, ct * e1z + st * e2z
+        v1x, v1y, v1z = v2y * v0z - v2z * v0y, v2z * v0x - v2x * v0z, v2x * v0y - v2y * v0x
+        half = 0.5 * (m00 + m11)
+        rad = math.hypot(0.5 * (m00 - m11), m01)
+        Avx = a00 * v2x + a01 * v2y + a02 * v2z
+        Avy = a01 * v2x + a11 * v2y + a12 * v2z
+        Avz = a02 * v2x + a12 * v2y + a22 * v2z
+        w[i, 0], w[i, 1], w[i, 2] = half + rad, half - rad, v2x * Avx + v2y * Avy + v2z * Avz
+        V[i, 0, 0], V[i, 1, 0], V[i, 2, 0] = v0x, v0y, v0z
+        V[i, 0, 1], V[i, 1, 1], V[i, 2, 1] = v1x, v1y, v1z
+        V[i, 0, 2], V[i, 1, 2], V[i, 2, 2] = v2x, v2y, v2z
+        finite = True
+        for a in range(3):
+            finite &= math.isfinite(w[i, a])
+            for b in range(3):
+                finite &= math.isfinite(V[i, a, b])
+        unsure[i] = not (finite and w[i, 1] - w[i, 2] > min_rel_gap * abs(w[i, 0]))
+    return w, V, unsure
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def neighbourhood_scatter(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((M, 3) mean, (M, 3, 3) scatter ``D^T D``) of (M, k, 3) neighbourhoods, D = P - mean (m, m^2)."""
+    m, k = P.shape[0], P.shape[1]
+    mean = np.empty((m, 3))
+    S = np.empty((m, 3, 3))
+    for i in range(m):
+        mx = my = mz = 0.0
+        for j in range(k):
+            mx += P[i, j, 0]
+            my += P[i, j, 1]
+            mz += P[i, j, 2]
+        mx, my, mz = mx / k, my / k, mz / k
+        sxx = sxy = sxz = syy = syz = szz = 0.0
+        for j in range(k):
+            dx, dy, dz = P[i, j, 0] - mx, P[i, j, 1] - my, P[i, j, 2] - mz
+            sxx += dx * dx
+            sxy += dx * dy
+            sxz += dx * dz
+            syy += dy * dy
+            syz += dy * dz
+            szz += dz * dz
+        mean[i, 0], mean[i, 1], mean[i, 2] = mx, my, mz
+        S[i, 0, 0], S[i, 0, 1], S[i, 0, 2] = sxx, sxy, sxz
+        S[i, 1, 0], S[i, 1, 1], S[i, 1, 2] = sxy, syy, syz
+        S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = sxz, syz, szz
+    return mean, S
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def screw_motion(xi: np.ndarray, s: np.ndarray, points: np.ndarray, normals: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``exp(s_i xi)`` applied to each point p_i (N, 3), and its rotation alone to each normal (N, 3) or (0, 3).
+
+    xi: (6,) twist (rho m, omega rad) of ``simlidar.se3``; s: (N,) fractions of it. Exact (not a
+    small-angle approximation): with k = omega / |omega| and phi = s |omega|, Rodrigues' formula
+    ``R p = cos phi p + sin phi (k x p) + (1 - cos phi)(k . p) k`` and the SE(3) left Jacobian's
+    translation ``s rho + s (1 - cos phi) / phi (k x rho) + s (phi - sin phi) / phi k x (k x rho)``
+    (its series below phi = 1e-6). ``odometry.deskew.screw_apply`` is the caller.
+    """
+    rx, ry, rz = xi[0], xi[1], xi[2]
+    theta = math.sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5])
+    out_p = np.empty_like(points)
+    out_n = np.empty_like(normals)
+    if theta < 1e-12:
+        for i in range(points.shape[0]):
+            out_p[i, 0], out_p[i, 1], out_p[i, 2] = points[i, 0] + s[i] * rx, points[i, 1] + s[i] * ry, \
+                points[i, 2] + s[i] * rz
+        out_n[:] = normals
+        return out_p, out_n
+    kx, ky, kz = xi[3] / theta, xi[4] / theta, xi[5] / theta
+    # k x rho and k x (k x rho)
+    ux, uy, uz = ky * rz - kz * ry, kz * rx - kx * rz, kx * ry - ky * rx
+    vx, vy, vz = ky * uz - kz * uy, kz * ux - kx * uz, kx * uy - ky * ux
+    for i in range(points.shape[0]):
+        si = s[i]
+        phi = si * theta
+        c, sn = math.cos(phi), math.sin(phi)
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        w = (kx * x + ky * y + kz * z) * (1.0 - c)
+        if phi < 1e-6:
+            a, b = si * phi / 2.0, si * phi * phi / 6.0
+        else:
+            a, b = si * (1.0 - c) / phi, si * (phi - sn) / phi
+        out_p[i, 0] = c * x + sn * (ky * z - kz * y) + w * kx + (si * rx + a * ux + b * vx)
+        out_p[i, 1] = c * y + sn * (kz * x - kx * z) + w * ky + (si * ry + a * uy + b * vy)
+        out_p[i, 2] = c * z + sn * (kx * y - ky * x) + w * kz + (si * rz + a * uz + b * vz)
+        if normals.shape[0]:
+            x, y, z = normals[i, 0], normals[i, 1], normals[i, 2]
+            w = (kx * x + ky * y + kz * z) * (1.0 - c)
+            out_n[i, 0] = c * x + sn * (ky * z - kz * y) + w * kx
+            out_n[i, 1] = c * y + sn * (kz * x - kx * z) + w * ky
+            out_n[i, 2] = c * z + sn * (kx * y - ky * x) + w * kz
+    return out_p, out_n
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def reusable_matches(points: np.ndarray, searched_at: np.ndarray, nearest: np.ndarray, clear_m: np.ndarray,
+                     target_points: np.ndarray, bound_m: float, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Which nearest neighbours found earlier still hold: ((M,) their distances, inf elsewhere; rows to search).
+
+    points: (M, 3) the query points now; searched_at: (M, 3) where each was last searched from;
+    nearest: (M,) the nearest target row found there (``len(target_points)``: none within the bound);
+    clear_m: (M,) no other target point was within this of ``searched_at``. A point moved by s from
+    where its nearest lay at d keeps it while ``d + s + margin < clear`` and ``d + margin < bound``
+    (``odometry.icp.match``); d is computed as ``sqrt((dx^2 + dy^2) + dz^2)``, as the k-d tree does.
+    """
+    m = points.shape[0]
+    n = target_points.shape[0]
+    dist = np.full(m, np.inf)
+    redo = np.empty(m, dtype=np.int64)
+    count = 0
+    for i in range(m):
+        j = nearest[i]
+        if j < n:
+            sx, sy, sz = points[i, 0] - searched_at[i, 0], points[i, 1] - searched_at[i, 1], \
+                points[i, 2] - searched_at[i, 2]
+            shift = math.sqrt(sx * sx + sy * sy + sz * sz)
+            dx, dy, dz = points[i, 0] - target_points[j, 0], points[i, 1] - target_points[j, 1], \
+                points[i, 2] - target_points[j, 2]
+            d = math.sqrt((dx * dx + dy * dy) + dz * dz)
+            if d + shift + margin_m < clear_m[i] and d + margin_m < bound_m:
+                dist[i] = d
+                continue
+        redo[count] = i
+        count += 1
+    return dist, redo[:count]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def packed_voxel_keys(points: np.ndarray, voxel_size_m: float, key_bits: int) -> tuple[np.ndarray, bool]:
+    """((N,) int64 keys of the cubic voxels holding (N, 3) points, all inside the grid).
+
+    A key packs the three indices ``floor(p / voxel_size_m) + 2^(key_bits - 1)``, ``key_bits``
+    bits each, x highest (``odometry.voxels.voxel_keys`` is the caller and raises when one
+    falls outside: the second value is False, or a coordinate is not finite).
+    """
+    offset = 1 << (key_bits - 1)
+    mask = (1 << key_bits) - 1
+    keys = np.empty(points.shape[0], dtype=np.int64)
+    inside = True
+    for r in range(points.shape[0]):
+        key = np.int64(0)
+        for c in range(3):
+            x = points[r, c] / voxel_size_m
+            # (checked on the float, before it becomes an integer: also false for nan)
+            if not (x >= -offset and x < mask + 1 - offset):
+                inside = False
+                x = 0.0
+            key = (key << key_bits) | (np.int64(math.floor(x)) + offset)
+        keys[r] = key
+    return keys, inside
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def voxel_sums(slot: np.ndarray, k: int, points: np.ndarray, values: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per voxel: (k, 3) sum of the points in it, (k,) of their values, (k,) counts.
+
+    slot: (N,) int voxel (0 .. k - 1) of each (N, 3) point; values: (N,) or (0,).
+    Sums run in row order (as ``numpy.bincount`` adds).
+    """
+    sums = np.zeros((k, 3))
+    value_sums = np.zeros(k)
+    counts = np.zeros(k, dtype=np.int64)
+    with_values = values.shape[0] > 0
+    for r in range(slot.shape[0]):
+        v = slot[r]
+        sums[v, 0] += points[r, 0]
+        sums[v, 1] += points[r, 1]
+        sums[v, 2] += points[r, 2]
+        counts[v] += 1
+        if with_values:
+            value_sums[v] += values[r]
+    return sums, value_sums, counts
+
+
+@njit(cache=True, nogil=True)
+def group_sorted(keys: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((K,) the distinct keys ascending, (N,) the slot of each key among them), given ``order``,
+    (N,) an argsort of the (N,) keys: ``numpy.unique(keys, return_inverse=True)`` in one pass."""
+    n = keys.shape[0]
+    slot = np.empty(n, dtype=np.int64)
+    distinct = np.empty(n, dtype=np.int64)
+    k = -1
+    for i in range(n):
+        key = keys[order[i]]
+        if k < 0 or key != distinct[k]:
+            k += 1
+            distinct[k] = key
+        slot[order[i]] = k
+    return distinct[:k + 1], slot

@@ -1,0 +1,124 @@
+"""The compiled kernels (odometry/kernels.py) compute what their docstrings' numpy expressions compute."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from odometry import kernels
+from odometry.constraints import constraint_rows
+from simlidar import se3
+
+
+def unit_rows(rng, n):
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_plane_normal_equations_are_J_transpose_J_and_J_transpose_r():
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-40, 40, size=(3000, 3))
+    q = p + rng.normal(scale=0.05, size=p.shape)
+    n = unit_rows(rng, 3000)
+    H, g, sum_r2 = kernels.plane_normal_equations(p, q, n)
+    r = np.einsum("ij,ij->i", n, p - q)
+    J = np.hstack([n, np.cross(p, n)])
+    np.testing.assert_allclose(H, J.T @ J, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g, J.T @ r, rtol=1e-12, atol=1e-12)
+    assert sum_r2 == pytest.approx(float(r @ r), rel=1e-12)
+    H0, g0, s0 = kernels.plane_normal_equations(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+    assert not H0.any() and not g0.any() and s0 == 0.0
+
+
+def test_constraint_information_sums_the_scaled_rows_of_the_chosen_points():
+    rng = np.random.default_rng(1)
+    p = rng.uniform(-30, 30, size=(500, 3))
+    n = unit_rows(rng, 500)
+    rows = np.flatnonzero(rng.random(500) < 0.4)
+    J = constraint_rows(p[rows], n[rows], 7.0)
+    np.testing.assert_allclose(kernels.constraint_information(p, n, rows, 7.0), J.T @ J, rtol=1e-12, atol=1e-12)
+
+
+def test_eigh3_closed_form_decomposes_symmetric_matrices():
+    rng = np.random.default_rng(2)
+    P = rng.normal(size=(400, 12, 3)) * np.array([2.0, 0.5, 0.01])
+    R = se3.exp(np.concatenate([np.zeros(3), rng.normal(size=3)]))[:3, :3]
+    D = (P - P.mean(axis=1, keepdims=True)) @ R.T
+    A = np.einsum("mki,mkj->mij", D, D)
+    w, V, unsure = kernels.eigh3_closed_form(A, 1e-3)
+    assert not unsure.any()
+    np.testing.assert_allclose(w, np.linalg.eigvalsh(A)[:, ::-1], rtol=1e-9, atol=1e-12 * np.abs(A).max())
+    np.testing.assert_allclose(np.einsum("mij,mjk->mik", A, V), V * w[:, None, :], atol=1e-9 * np.abs(A).max())
+    np.testing.assert_allclose(np.einsum("mji,mjk->mik", V, V), np.broadcast_to(np.eye(3), V.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(V), 1.0, atol=1e-12)
+    # two equal eigenvalues (a rod) and a non-finite matrix are flagged for LAPACK
+    rod = np.diag([5.0, 1.0, 1.0])[None]
+    assert kernels.eigh3_closed_form(np.concatenate([rod, np.full((1, 3, 3), np.nan)]), 1e-3)[2].all()
+
+
+def test_neighbourhood_scatter_is_the_centred_scatter():
+    P = np.random.default_rng(6).normal(size=(300, 12, 3)) * 5 + 40
+    mean, S = kernels.neighbourhood_scatter(P)
+    D = P - P.mean(axis=1, keepdims=True)
+    np.testing.assert_allclose(mean, P.mean(axis=1), rtol=1e-14)
+    np.testing.assert_allclose(S, np.einsum("mki,mkj->mij", D, D), rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.parametrize("omega", [0.0, 1e-14, 1e-8, 0.03, 1.5])
+def test_screw_motion_is_the_exponential_of_each_points_fraction_of_the_twist(omega):
+    rng = np.random.default_rng(3)
+    xi = np.concatenate([rng.normal(size=3), omega * np.array([0.36, -0.48, 0.8])])
+    s = np.concatenate([[0.0, 1e-9], rng.uniform(0.0, 1.0, size=98)])
+    p = rng.uniform(-50, 50, size=(100, 3))
+    n = unit_rows(rng, 100)
+    moved, turned = kernels.screw_motion(xi, s, p, n)
+    for i in range(100):
+        T = se3.exp(s[i] * xi)
+        np.testing.assert_allclose(moved[i], T[:3, :3] @ p[i] + T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(turned[i], T[:3, :3] @ n[i], atol=1e-14)
+    moved_alone, none = kernels.screw_motion(xi, s, p, np.zeros((0, 3)))
+    np.testing.assert_array_equal(moved_alone, moved)
+    assert none.shape == (0, 3)
+
+
+def test_reusable_matches_keep_only_nearest_neighbours_they_can_prove():
+    rng = np.random.default_rng(4)
+    target = rng.uniform(-10, 10, size=(4000, 3))
+    tree = cKDTree(target)
+    searched = rng.uniform(-10, 10, size=(2000, 3))
+    bound = 1.0
+    d2, i2 = tree.query(searched, k=2, distance_upper_bound=bound)
+    clear = np.minimum(d2[:, 1], bound)
+    moved = searched + rng.normal(scale=0.02, size=searched.shape)
+    dist, redo = kernels.reusable_matches(moved, searched, i2[:, 0], clear, target, bound, 1e-9)
+    held = np.setdiff1d(np.arange(2000), redo)
+    assert len(held) > 1000 and len(redo) > 0
+    d_now, i_now = tree.query(moved, k=1, distance_upper_bound=bound)
+    np.testing.assert_array_equal(i2[held, 0], i_now[held])  # a kept match is the nearest now
+    np.testing.assert_allclose(dist[held], d_now[held], rtol=1e-12)
+    assert np.isinf(dist[redo]).all()
+    assert set(np.flatnonzero(np.isinf(d2[:, 0]))) <= set(redo)  # no neighbour then: searched again
+
+
+def test_voxel_keys_and_grouping_agree_with_numpy():
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-60, 60, size=(20000, 3))
+    keys, inside = kernels.packed_voxel_keys(p, 0.35, 21)
+    ijk = np.floor(p / 0.35).astype(np.int64) + (1 << 20)
+    assert inside
+    np.testing.assert_array_equal(keys, (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2])
+    distinct, slot = kernels.group_sorted(keys, np.argsort(keys))
+    u, inverse = np.unique(keys, return_inverse=True)
+    np.testing.assert_array_equal(distinct, u)
+    np.testing.assert_array_equal(slot, inverse)
+    values = rng.random(20000)
+    sums, value_sums, counts = kernels.voxel_sums(slot, len(u), p, values)
+    np.testing.assert_array_equal(counts, np.bincount(inverse))
+    for c in range(3):
+        np.testing.assert_array_equal(sums[:, c], np.bincount(inverse, weights=p[:, c]))
+    np.testing.assert_array_equal(value_sums, np.bincount(inverse, weights=values))
+    for bad in (np.nan, np.inf, 1e9):
+        q = p.copy()
+        q[7, 1] = bad
+        assert not kernels.packed_voxel_keys(q, 0.35, 21)[1]
