@@ -105,7 +105,9 @@ def eigh3_closed_form(A: np.ndarray, min_rel_gap: float) -> tuple[np.ndarray, np
         c0x, c0y, c0z = r0y * r1z - r0z * r1y, r0z * r1x - r0x * r1z, r0x * r1y - r0y * r1x
         c1x, c1y, c1z = r0y * r2z - r0z * r2y, r0z * r2x - r0x * r2z, r0x * r2y - r0y * r2x
         c2x, c2y, c2z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
-        n0, n1, n2 = c0x * c0x + c0y * c0y + c0z * c0z, c1x * c1x + c1y * c1y + c1z * c1z, c2x * c2x + c2y * c2y + c2z * c2z
+        n0 = c0x * c0x + c0y * c0y + c0z * c0z
+        n1 = c1x * c1x + c1y * c1y + c1z * c1z
+        n2 = c2x * c2x + c2y * c2y + c2z * c2z
         if n0 >= n1 and n0 >= n2:
             s = math.sqrt(n0)
             v2x, v2y, v2z = c0x / s, c0y / s, c0z / s
