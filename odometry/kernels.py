@@ -328,3 +328,39 @@ def group_sorted(keys: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.nd
             distinct[k] = key
         slot[order[i]] = k
     return distinct[:k + 1], slot
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def beam_noise_moments(P: np.ndarray, mean: np.ndarray, V: np.ndarray, beams: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The sums over each neighbourhood that range noise along given beams puts into its normal.
+
+    P, beams: (M, k, 3) neighbour points (m) and the unit beams that measured them; mean (M, 3),
+    V (M, 3, 3): their PCA (columns v_0, v_1, v_2). With a_j = V^T (p_j - mean), h_j = a_j2,
+    c_j = V^T b_j and z_jl = h_j c_jl + a_jl c_j2 (l = 0, 1), returns (M, 2, 2) ``sum_j z_jl z_jm``
+    and (M, 3) ``sum_j c_jl^2`` (``odometry.ncf.normal_covariance_along_beams`` scales them).
+    """
+    m, k = P.shape[0], P.shape[1]
+    zz = np.empty((m, 2, 2))
+    cc = np.empty((m, 3))
+    for i in range(m):
+        s00 = s01 = s11 = q0 = q1 = q2 = 0.0
+        for j in range(k):
+            dx, dy, dz = P[i, j, 0] - mean[i, 0], P[i, j, 1] - mean[i, 1], P[i, j, 2] - mean[i, 2]
+            bx, by, bz = beams[i, j, 0], beams[i, j, 1], beams[i, j, 2]
+            a0 = dx * V[i, 0, 0] + dy * V[i, 1, 0] + dz * V[i, 2, 0]
+            a1 = dx * V[i, 0, 1] + dy * V[i, 1, 1] + dz * V[i, 2, 1]
+            h = dx * V[i, 0, 2] + dy * V[i, 1, 2] + dz * V[i, 2, 2]
+            c0 = bx * V[i, 0, 0] + by * V[i, 1, 0] + bz * V[i, 2, 0]
+            c1 = bx * V[i, 0, 1] + by * V[i, 1, 1] + bz * V[i, 2, 1]
+            c2 = bx * V[i, 0, 2] + by * V[i, 1, 2] + bz * V[i, 2, 2]
+            z0, z1 = h * c0 + a0 * c2, h * c1 + a1 * c2
+            s00 += z0 * z0
+            s01 += z0 * z1
+            s11 += z1 * z1
+            q0 += c0 * c0
+            q1 += c1 * c1
+            q2 += c2 * c2
+        zz[i, 0, 0], zz[i, 0, 1], zz[i, 1, 0], zz[i, 1, 1] = s00, s01, s01, s11
+        cc[i, 0], cc[i, 1], cc[i, 2] = q0, q1, q2
+    return zz, cc

@@ -112,6 +112,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import beam_noise_moments
 from .normals import NormalEstimate, local_pca
 
 # The error-budget c_tau (module notes, "Threshold"): a 3 deg 1-sigma tilt of the normal in its
@@ -511,19 +512,16 @@ def normal_covariance_along_beams(
     P = np.asarray(neighbourhoods, dtype=np.float64)
     pca = _checked_pca(P, pca)
     k = P.shape[1]
-    V = pca.axes
-    a = np.matmul(P - pca.mean[:, None, :], V)  # centred, PCA frame
-    c = np.matmul(np.asarray(beams, dtype=np.float64), V)  # beams, PCA frame
-    h = a[:, :, 2]
+    # (sums over each neighbourhood of z_jl z_jm and c_jl^2, c_j = V^T b_j the beam in the PCA frame)
+    zz, cc = beam_noise_moments(np.ascontiguousarray(P), np.ascontiguousarray(pca.mean),
+                                np.ascontiguousarray(pca.axes), np.ascontiguousarray(beams, dtype=np.float64))
     var = range_noise_std_m**2
-    z0 = h * c[:, :, 0] + a[:, :, 0] * c[:, :, 2]
-    z1 = h * c[:, :, 1] + a[:, :, 1] * c[:, :, 2]
-    num = var * _sym2(_dot(z0, z0), _dot(z0, z1), _dot(z1, z1))
+    num = var * zz
     lam = pca.scatter_eigenvalues
     gaps = lam[:, :2] - lam[:, 2:3]
     bad = _degenerate(pca, gaps)
     if noise_free_gaps:
-        n_diag = (k - 1) / k * var * np.einsum("mkl,mkl->ml", c, c)
+        n_diag = (k - 1) / k * var * cc
         gaps, unresolved = _resolved_gaps(gaps, n_diag, k, gap_significance_z)
         bad |= unresolved | _degenerate(pca, gaps)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
