@@ -112,7 +112,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import beam_noise_moments
+from .kernels import beam_noise_moments, range_noise_moments, tangent_covariance_in_frame
 from .normals import NormalEstimate, local_pca
 
 # The error-budget c_tau (module notes, "Threshold"): a 3 deg 1-sigma tilt of the normal in its
@@ -340,17 +340,7 @@ def _finish(pca: NormalEstimate, C: np.ndarray, bad: np.ndarray) -> NormalCovari
     ``bad`` (M,) marks normals without a finite covariance (set to inf).
     """
     V = pca.axes
-    Vt = V[:, :, :2]
-    cov = np.matmul(np.matmul(Vt, C), Vt.transpose(0, 2, 1))
-    c00, c01, c11 = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
-    half_tr = 0.5 * (c00 + c11)
-    rad = np.hypot(0.5 * (c00 - c11), c01)
-    ang = 0.5 * np.arctan2(2.0 * c01, c00 - c11)  # major axis in the (v_0, v_1) plane
-    ca, sa = np.cos(ang)[:, None], np.sin(ang)[:, None]
-    major = ca * V[:, :, 0] + sa * V[:, :, 1]
-    minor = -sa * V[:, :, 0] + ca * V[:, :, 1]
-    Q = np.stack([V[:, :, 2], minor, major], axis=2)
-    eig = np.stack([np.zeros_like(half_tr), np.maximum(half_tr - rad, 0.0), half_tr + rad], axis=1)
+    cov, eig, Q = tangent_covariance_in_frame(np.ascontiguousarray(V), np.ascontiguousarray(C))
     if np.any(bad):
         C[bad] = np.inf
         cov[bad] = np.inf
@@ -398,7 +388,7 @@ def normal_covariance(
             scatter the noise-free gap must exceed (only with ``noise_free_gaps``).
 
     Returns:
-        ``NormalCovariance`` (rad^2). Vectorised: O(M k) numpy work, no per-point loop.
+        ``NormalCovariance`` (rad^2). O(M k) work: the range model's sums in one compiled pass.
     """
     P = np.asarray(neighbourhoods, dtype=np.float64)
     pca = _checked_pca(P, pca)
@@ -408,36 +398,23 @@ def normal_covariance(
     if sensor_origin_m is not None:  # put the beams' origin at 0 (the PCA is translation-invariant)
         origin = np.asarray(sensor_origin_m, dtype=np.float64)
         P, mean = P - origin, mean - origin
-    PV = np.matmul(P, V)  # points in the PCA frame's axes, about the sensor, (M, k, 3)
-    a = PV - np.einsum("mi,mil->ml", mean, V)[:, None, :]  # centred: a_jl = d_j . v_l
     lam = pca.scatter_eigenvalues
     gaps = lam[:, :2] - lam[:, 2:3]
-    a0, a1, h = a[:, :, 0], a[:, :, 1], a[:, :, 2]
     if isinstance(noise, IsotropicNoise):
+        a = np.matmul(P - mean[:, None, :], V)  # centred, in the PCA frame: a_jl = d_j . v_l
+        a0, a1, h = a[:, :, 0], a[:, :, 1], a[:, :, 2]
         var = noise.point_noise_std_m**2
         # sum_j w_jl . w_jm = sum_j (a_jl a_jm + h_j^2 delta_lm)
         hh = _dot(h, h)
         num = var * _sym2(_dot(a0, a0) + hh, _dot(a0, a1), _dot(a1, a1) + hh)
         n_diag = np.full((len(P), 3), (k - 1) * var)
     elif isinstance(noise, RangeNoise):
-        r2 = np.einsum("mki,mki->mk", PV, PV)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv_r2 = 1.0 / r2
-        # z_jl = w_jl . b_j = (a_jl PV_j2 + h_j PV_jl) / r_j, the beam b_j = PV_j / r_j in this frame.
-        y0 = a0 * PV[:, :, 2] + h * PV[:, :, 0]
-        y1 = a1 * PV[:, :, 2] + h * PV[:, :, 1]
-        sa2 = noise.angular_noise_std_rad**2
-        beta_r2 = (noise.range_noise_std_m**2 - sa2 * r2) * inv_r2  # beta_j / r_j^2
-        by0 = beta_r2 * y0
-        num = _sym2(_dot(by0, y0), _dot(by0, y1), _dot(beta_r2 * y1, y1))
-        # v_l^T Sigma_j v_l = alpha_j + beta_j (PV_jl / r_j)^2, alpha_j = sa^2 r_j^2
-        n_diag = np.einsum("mk,mkl->ml", beta_r2, np.square(PV))
-        if sa2 > 0:
-            alpha = sa2 * r2
-            aa0 = alpha * a0
-            hh = _dot(alpha * h, h)
-            num += _sym2(_dot(aa0, a0) + hh, _dot(aa0, a1), _dot(alpha * a1, a1) + hh)
-            n_diag += alpha.sum(axis=1)[:, None]
+        # z_jl = w_jl . b_j = (a_jl PV_j2 + h_j PV_jl) / r_j, the beam b_j = PV_j / r_j in the PCA frame
+        # (PV_j = V^T p_j about the sensor); Sigma_j = alpha_j I + beta_j b_j b_j^T, and
+        # v_l^T Sigma_j v_l = alpha_j + beta_j (PV_jl / r_j)^2: summed in one compiled pass
+        num, n_diag = range_noise_moments(np.ascontiguousarray(P), np.ascontiguousarray(mean),
+                                          np.ascontiguousarray(V), noise.range_noise_std_m**2,
+                                          noise.angular_noise_std_rad**2)
         n_diag *= (k - 1) / k
     else:
         raise TypeError(f"unknown noise model {type(noise).__name__}")

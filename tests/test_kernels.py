@@ -122,3 +122,56 @@ def test_voxel_keys_and_grouping_agree_with_numpy():
         q = p.copy()
         q[7, 1] = bad
         assert not kernels.packed_voxel_keys(q, 0.35, 21)[1]
+
+
+def pca_of(P):
+    """(mean (M, 3), V (M, 3, 3)) of neighbourhoods by numpy's SVD."""
+    mean = P.mean(axis=1)
+    _, _, Vh = np.linalg.svd(P - mean[:, None, :], full_matrices=False)
+    return mean, np.ascontiguousarray(Vh.transpose(0, 2, 1))
+
+
+def test_beam_noise_moments_are_the_sums_of_the_beam_terms():
+    rng = np.random.default_rng(7)
+    P = rng.normal(size=(200, 12, 3)) * np.array([1.0, 0.5, 0.02]) + rng.uniform(-30, 30, size=(200, 1, 3))
+    beams = unit_rows(rng, 200 * 12).reshape(200, 12, 3)
+    mean, V = pca_of(P)
+    zz, cc = kernels.beam_noise_moments(P, mean, V, beams)
+    a = np.einsum("mki,mil->mkl", P - mean[:, None, :], V)
+    c = np.einsum("mki,mil->mkl", beams, V)
+    z = a[:, :, 2:3] * c[:, :, :2] + a[:, :, :2] * c[:, :, 2:3]
+    np.testing.assert_allclose(zz, np.einsum("mkl,mkn->mln", z, z), rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(cc, np.einsum("mkl,mkl->ml", c, c), rtol=1e-12)
+
+
+@pytest.mark.parametrize("angular_var", [0.0, 1e-7])
+def test_range_noise_moments_are_the_sums_of_the_range_model_terms(angular_var):
+    rng = np.random.default_rng(8)
+    P = rng.normal(size=(200, 12, 3)) * np.array([1.0, 0.5, 0.02]) + rng.uniform(-30, 30, size=(200, 1, 3))
+    mean, V = pca_of(P)
+    num, diag = kernels.range_noise_moments(P, mean, V, 4e-4, angular_var)
+    PV = np.einsum("mki,mil->mkl", P, V)
+    a = np.einsum("mki,mil->mkl", P - mean[:, None, :], V)
+    r2 = np.einsum("mki,mki->mk", P, P)
+    beta_r2 = (4e-4 - angular_var * r2) / r2
+    alpha = angular_var * r2
+    y = a[:, :, :2] * PV[:, :, 2:3] + a[:, :, 2:3] * PV[:, :, :2]
+    expect = np.einsum("mk,mkl,mkn->mln", beta_r2, y, y) + np.einsum("mk,mkl,mkn->mln", alpha, a[:, :, :2], a[:, :, :2])
+    expect += np.einsum("mk,mk->m", alpha, a[:, :, 2] ** 2)[:, None, None] * np.eye(2)
+    np.testing.assert_allclose(num, expect, rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(diag, np.einsum("mk,mkl->ml", beta_r2, PV**2) + alpha.sum(axis=1)[:, None],
+                               rtol=1e-10)
+
+
+def test_tangent_covariance_in_frame_rotates_and_decomposes():
+    rng = np.random.default_rng(9)
+    _, V = pca_of(rng.normal(size=(100, 12, 3)))
+    L = rng.normal(size=(100, 2, 2))
+    C = L @ L.transpose(0, 2, 1)
+    cov, eig, Q = kernels.tangent_covariance_in_frame(V, C)
+    Vt = V[:, :, :2]
+    np.testing.assert_allclose(cov, Vt @ C @ Vt.transpose(0, 2, 1), atol=1e-12)
+    w, U = np.linalg.eigh(cov)  # ascending: 0 along the normal, then minor, major
+    np.testing.assert_allclose(eig, np.maximum(w, 0.0), atol=1e-12)
+    np.testing.assert_allclose(np.abs(np.einsum("mij,mik->mjk", Q, U)), np.broadcast_to(np.eye(3), Q.shape),
+                               atol=1e-6)
