@@ -36,8 +36,15 @@ def _screw(xi: np.ndarray, s: np.ndarray, points: np.ndarray | None, normals: np
     """``screw_apply`` of (N, 3) points and the rotation alone of (N, 3) normals (either may be None),
     in one compiled pass (``odometry.kernels.screw_motion``)."""
     xi = np.asarray(xi, dtype=np.float64)
-    s = np.ascontiguousarray(s, dtype=np.float64)
+    if points is None and normals is None:
+        return None, None
+    n = len(points if points is not None else normals)
+    if points is not None and normals is not None and np.shape(normals) != np.shape(points):
+        raise ValueError(f"normals must be shaped as the points {np.shape(points)}, got {np.shape(normals)}")
+    s = np.ascontiguousarray(np.broadcast_to(np.asarray(s, dtype=np.float64), (n,)))  # (a scalar: every point)
     if points is None:  # (the rotation alone: a twist without translation moves nothing else)
+        if np.linalg.norm(xi[3:]) < 1e-12:
+            return None, np.array(normals, dtype=np.float64)
         rotated, _ = screw_motion(np.concatenate([np.zeros(3), xi[3:]]), s, _rows(normals), _NO_ROWS)
         return None, rotated
     moved, n_out = screw_motion(xi, s, _rows(points), _NO_ROWS if normals is None else _rows(normals))
@@ -48,7 +55,11 @@ _NO_ROWS = np.zeros((0, 3))
 
 
 def _rows(a: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    """(N, 3) float64 contiguous rows (the kernel's layout); anything else is refused."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"need (N, 3) points or normals, got {a.shape}")
+    return a
 
 
 def deskew(points: np.ndarray, times_s: np.ndarray, motion_per_frame: np.ndarray, frame_period_s: float) -> np.ndarray:

@@ -194,7 +194,7 @@ def screw_motion(xi: np.ndarray, s: np.ndarray, points: np.ndarray, normals: np.
     small-angle approximation): with k = omega / |omega| and phi = s |omega|, Rodrigues' formula
     ``R p = cos phi p + sin phi (k x p) + (1 - cos phi)(k . p) k`` and the SE(3) left Jacobian's
     translation ``s rho + s (1 - cos phi) / phi (k x rho) + s (phi - sin phi) / phi k x (k x rho)``
-    (its series below phi = 1e-6). ``odometry.deskew.screw_apply`` is the caller.
+    (its series below |phi| = 1e-6). ``odometry.deskew.screw_apply`` is the caller.
     """
     rx, ry, rz = xi[0], xi[1], xi[2]
     theta = math.sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5])
@@ -216,7 +216,7 @@ def screw_motion(xi: np.ndarray, s: np.ndarray, points: np.ndarray, normals: np.
         c, sn = math.cos(phi), math.sin(phi)
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
         w = (kx * x + ky * y + kz * z) * (1.0 - c)
-        if phi < 1e-6:
+        if abs(phi) < 1e-6:
             a, b = si * phi / 2.0, si * phi * phi / 6.0
         else:
             a, b = si * (1.0 - c) / phi, si * (phi - sn) / phi

@@ -345,6 +345,7 @@ def _finish(pca: NormalEstimate, C: np.ndarray, bad: np.ndarray) -> NormalCovari
         C[bad] = np.inf
         cov[bad] = np.inf
         eig[bad, 1:] = np.inf
+        Q[bad] = np.nan  # (no covariance, no principal axes)
     return NormalCovariance(
         normals=pca.normals,
         axes=V,
@@ -413,8 +414,8 @@ def normal_covariance(
         # (PV_j = V^T p_j about the sensor); Sigma_j = alpha_j I + beta_j b_j b_j^T, and
         # v_l^T Sigma_j v_l = alpha_j + beta_j (PV_jl / r_j)^2: summed in one compiled pass
         num, n_diag = range_noise_moments(np.ascontiguousarray(P), np.ascontiguousarray(mean),
-                                          np.ascontiguousarray(V), noise.range_noise_std_m**2,
-                                          noise.angular_noise_std_rad**2)
+                                          np.ascontiguousarray(V), float(noise.range_noise_std_m)**2,
+                                          float(noise.angular_noise_std_rad)**2)
         n_diag *= (k - 1) / k
     else:
         raise TypeError(f"unknown noise model {type(noise).__name__}")
@@ -491,7 +492,8 @@ def normal_covariance_along_beams(
     k = P.shape[1]
     # (sums over each neighbourhood of z_jl z_jm and c_jl^2, c_j = V^T b_j the beam in the PCA frame)
     zz, cc = beam_noise_moments(np.ascontiguousarray(P), np.ascontiguousarray(pca.mean),
-                                np.ascontiguousarray(pca.axes), np.ascontiguousarray(beams, dtype=np.float64))
+                                np.ascontiguousarray(pca.axes),
+                                np.ascontiguousarray(np.broadcast_to(np.asarray(beams, dtype=np.float64), P.shape)))
     var = range_noise_std_m**2
     num = var * zz
     lam = pca.scatter_eigenvalues

@@ -19,8 +19,10 @@ _KEY_MASK = (1 << _KEY_BITS) - 1
 
 def voxel_keys(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
     """(N, 3) points -> (N,) int64 key of the cubic voxel holding each point."""
-    keys, inside = packed_voxel_keys(np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3),
-                                     float(voxel_size_m), _KEY_BITS)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"need (N, 3) points, got {points.shape}")
+    keys, inside = packed_voxel_keys(points, float(voxel_size_m), _KEY_BITS)
     if not inside:
         raise ValueError(f"points beyond +-{_KEY_OFFSET * voxel_size_m:.3g} m (or not finite) cannot be put in a "
                          f"voxel grid of {voxel_size_m:g} m")
@@ -53,6 +55,8 @@ def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray 
     keys = voxel_keys(points, voxel_size_m)
     voxels, slot = group_sorted(keys, np.argsort(keys))
     v = np.zeros(0) if values is None else np.ascontiguousarray(values, dtype=np.float64)
+    if values is not None and v.shape != (len(points),):
+        raise ValueError(f"need one value per point ({len(points)},), got {v.shape}")
     sums, value_sums, counts = voxel_sums(slot, len(voxels), points, v)
     if values is None:
         return sums / counts[:, None]

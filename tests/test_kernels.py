@@ -175,3 +175,23 @@ def test_tangent_covariance_in_frame_rotates_and_decomposes():
     np.testing.assert_allclose(eig, np.maximum(w, 0.0), atol=1e-12)
     np.testing.assert_allclose(np.abs(np.einsum("mij,mik->mjk", Q, U)), np.broadcast_to(np.eye(3), Q.shape),
                                atol=1e-6)
+
+
+def test_the_kernels_callers_refuse_what_the_kernels_cannot_check():
+    """numba does not check bounds: the numpy callers check shapes (and broadcast a scalar time) first."""
+    from odometry.deskew import redeskew, screw_apply
+    from odometry.voxels import voxel_centroids, voxel_keys
+
+    rng = np.random.default_rng(10)
+    p = rng.uniform(-10, 10, size=(50, 3))
+    xi = np.array([0.5, 0.1, 0.0, 0.0, 0.01, 0.03])
+    np.testing.assert_array_equal(screw_apply(xi, 0.5, p), screw_apply(xi, np.full(50, 0.5), p))
+    with pytest.raises(ValueError):
+        screw_apply(xi, np.full(49, 0.5), p)
+    with pytest.raises(ValueError):
+        redeskew(p, p[:10], np.zeros(50), np.eye(4), se3.exp(xi), 0.1)
+    np.testing.assert_array_equal(screw_apply(np.zeros(6), np.nan, p, rotate_only=True), p)
+    with pytest.raises(ValueError):
+        voxel_keys(np.hstack([p, p[:, :1]]), 0.5)
+    with pytest.raises(ValueError):
+        voxel_centroids(p, 0.5, np.zeros(49))
