@@ -65,6 +65,8 @@ from typing import Literal
 
 import numpy as np
 
+from .kernels import neighbour_beam_distance_table
+
 KITTI_VERTICAL_ANGLE_CORRECTION_DEG = 0.205
 
 # Column order of ``neighbour_beam_distances``: (vertical side, azimuth side),
@@ -163,33 +165,15 @@ def neighbour_beam_distances(
         raise ValueError(f"formula must be 'beam' or 'paper', got {formula!r}")
     if len(rings) and (rings.min() < 0 or rings.max() >= sensor.rings):
         raise ValueError(f"rings must be in [0, {sensor.rings}), got {rings.min()} .. {rings.max()}")
-    x, y = p[:, 0], p[:, 1]
-    r = np.linalg.norm(p, axis=1)
-    rho = np.hypot(x, y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        p_hat = p / r[:, None]
-        u = np.stack([-y, x, np.zeros_like(x)], axis=1) / rho[:, None]  # along increasing azimuth
-    v = np.cross(p_hat, u)  # along increasing elevation (unit: p_hat is perpendicular to u)
-    n_b = np.einsum("ij,ij->i", p_hat, n)
-    n_u = np.einsum("ij,ij->i", u, n)
-    n_v = np.einsum("ij,ij->i", v, n)
-    L_h = rho * sensor.azimuth_step_rad  # r phi cos(e): the azimuth circle has radius rho
-    pitch = {-1: sensor.ring_pitch_below_rad[rings], +1: sensor.ring_pitch_above_rad[rings]}
-    out = np.empty((len(p), 4))
-    for col, (s_v, s_h) in enumerate(NEIGHBOUR_OFFSETS):
-        L_v = r * pitch[s_v]
-        len2 = L_h**2 + L_v**2  # |p_kl|^2 (u and v are orthonormal)
-        pn = s_h * L_h * n_u + s_v * L_v * n_v  # p_kl . n
-        if formula == "beam":
-            den = n_b * n_b
-            extra = np.divide(pn * pn, den, out=np.full_like(den, np.inf), where=den > 0)
-            d = np.sqrt(len2 + extra)
-        else:
-            den2 = len2 - pn * pn
-            d = np.divide(len2, np.sqrt(np.maximum(den2, 0.0)), out=np.full_like(len2, np.inf), where=den2 > 0)
-        d[np.isnan(L_v)] = np.nan
-        out[:, col] = d
-    return out
+    # (one compiled pass: the formulas are in the kernel's docstring and the module notes)
+    return neighbour_beam_distance_table(
+        np.ascontiguousarray(p), np.ascontiguousarray(n),
+        np.ascontiguousarray(sensor.ring_pitch_below_rad[rings], dtype=np.float64),
+        np.ascontiguousarray(sensor.ring_pitch_above_rad[rings], dtype=np.float64),
+        float(sensor.azimuth_step_rad), _OFFSETS, formula == "paper")
+
+
+_OFFSETS = np.array(NEIGHBOUR_OFFSETS, dtype=np.int64)
 
 
 def gcr_threshold_m(

@@ -445,3 +445,61 @@ def tangent_covariance_in_frame(V: np.ndarray, C: np.ndarray) -> tuple[np.ndarra
         minor = half_tr - rad
         eig[i, 0], eig[i, 1], eig[i, 2] = 0.0, 0.0 if minor < 0 else minor, half_tr + rad  # (nan stays nan)
     return cov, eig, Q
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def fill_range_image(rings: np.ndarray, points: np.ndarray, n_rings: int, n_columns: int) -> np.ndarray:
+    """(n_rings, n_columns) int64: the row of the (last) point in each (ring, azimuth column) cell, -1 where none.
+
+    rings: (N,) int in [0, n_rings); points: (N, 3), m. A point's column is
+    ``floor((atan2(y, x) + pi) n_columns / (2 pi)) mod n_columns`` (``odometry.scan_lines.azimuth_columns``).
+    """
+    image = np.full((n_rings, n_columns), -1, dtype=np.int64)
+    scale = n_columns / (2.0 * np.pi)
+    for i in range(points.shape[0]):
+        column = np.int64(math.floor((math.atan2(points[i, 1], points[i, 0]) + np.pi) * scale)) % n_columns
+        image[rings[i], column] = i
+    return image
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def neighbour_beam_distance_table(points: np.ndarray, normals: np.ndarray, pitch_below: np.ndarray,
+                                  pitch_above: np.ndarray, azimuth_step_rad: float, offsets: np.ndarray,
+                                  printed: bool) -> np.ndarray:
+    """(M, 4) the GCR's neighbour beam distances d_kl of (M, 3) points with (M, 3) unit normals, m.
+
+    pitch_below, pitch_above: (M,) the ring pitch to the ring below / above each point, rad (nan: none);
+    offsets: (4, 2) int (vertical side, azimuth side) of each column. With r = |p|, rho = |p_xy|, the
+    beam p^ = p / r, u = (-y, x, 0) / rho, v = p^ x u, L_h = rho phi, L_v = r pitch, |p_kl|^2 =
+    L_h^2 + L_v^2 and p_kl . n = s_h L_h (u . n) + s_v L_v (v . n): ``printed`` False (the beam form)
+    gives sqrt(|p_kl|^2 + (p_kl . n)^2 / (p^ . n)^2), True the paper's printed
+    |p_kl|^2 / sqrt(|p_kl|^2 - (p_kl . n)^2); inf where the denominator is not positive, nan where
+    the ring has no neighbour on that side (``odometry.gcr.neighbour_beam_distances`` is the caller).
+    """
+    m = points.shape[0]
+    out = np.empty((m, 4))
+    for i in range(m):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        r = math.sqrt(x * x + y * y + z * z)
+        rho = math.hypot(x, y)
+        bx, by, bz = x / r, y / r, z / r
+        ux, uy = -y / rho, x / rho
+        vx, vy, vz = -bz * uy, bz * ux, bx * uy - by * ux  # p^ x u, u having no z
+        n_b = bx * nx + by * ny + bz * nz
+        n_u = ux * nx + uy * ny
+        n_v = vx * nx + vy * ny + vz * nz
+        L_h = rho * azimuth_step_rad
+        for col in range(4):
+            s_v, s_h = offsets[col, 0], offsets[col, 1]
+            L_v = r * (pitch_below[i] if s_v < 0 else pitch_above[i])
+            len2 = L_h * L_h + L_v * L_v
+            pn = s_h * L_h * n_u + s_v * L_v * n_v
+            if printed:
+                den2 = len2 - pn * pn
+                d = len2 / math.sqrt(den2) if den2 > 0 else np.inf
+            else:
+                den = n_b * n_b
+                d = math.sqrt(len2 + pn * pn / den) if den > 0 else np.inf
+            out[i, col] = np.nan if math.isnan(L_v) else d
+    return out

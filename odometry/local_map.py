@@ -191,12 +191,14 @@ class LocalMap:
         return self._payload
 
     def update(self, points_world: np.ndarray, sensor_position_m: np.ndarray,
-               payload: np.ndarray | None = None) -> MapStats:
+               payload: np.ndarray | None = None, nearest_m: np.ndarray | None = None) -> MapStats:
         """Add (N, 3) world points where their voxels have room, then drop far points.
 
         ``payload`` (N,): optional values (any dtype, e.g. row numbers into a table kept
         elsewhere) that stay with their points through the voxel caps and the pruning
         (``payload``). A map either carries one from its first update on, or never.
+        ``nearest_m`` (N,): each point's distance to its nearest map point, m, when the caller
+        knows it (inf where none is within ``min_spacing_m``): the spacing check then does not search.
 
         The k-d tree of the new map is built on a background thread (it releases the GIL)
         while the next scan is cleaned and filtered; ``target`` waits for it.
@@ -212,19 +214,23 @@ class LocalMap:
                 self._payload = np.zeros(0, dtype=payload.dtype)
         elif self._payload is not None:
             raise ValueError("this map carries a payload: give one with every update")
-        added = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload)
+        if nearest_m is not None and np.shape(nearest_m) != (len(points_world),):
+            raise ValueError(f"nearest_m must be ({len(points_world)},), got {np.shape(nearest_m)}")
+        added = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload, nearest_m)
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
         # (built on the background thread while the next scan is cleaned and filtered)
         self._tree = background().submit(KDTree, self.points)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 
-    def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None) -> int:
+    def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None,
+                nearest_m: np.ndarray | None = None) -> int:
         if len(points) == 0:
             return 0
         if self.min_spacing_m > 0 and len(self.points):
             # (the points of one update are a scan's voxel centroids, already spaced by its voxel grid)
-            d, _ = self._tree.result().query(points, k=1, distance_upper_bound=self.min_spacing_m)
-            new = ~np.isfinite(d)
+            if nearest_m is None:
+                nearest_m, _ = self._tree.result().query(points, k=1, distance_upper_bound=self.min_spacing_m)
+            new = ~(nearest_m < self.min_spacing_m)  # (as the k-d tree's bound: strictly within)
             points = np.compress(new, points, axis=0)  # (compress, take: numpy's fast row gathers)
             if payload is not None:
                 payload = payload[new]

@@ -33,7 +33,7 @@ from .config import OdometryConfig
 from .deskew import deskew, redeskew
 from .filters import FilteredScan, filter_scan, scan_normals_needed
 from .gcr import correct_kitti_vertical_angle, gcr_threshold_m, ring_of_points
-from .icp import RegistrationResult, Source, Target, register, rejectors_for
+from .icp import RegistrationResult, Source, Target, match, register, rejectors_for
 from .kdtree import KDTree
 from .local_map import LocalMap
 from .normals import estimate_normals
@@ -389,17 +389,19 @@ class Odometry:
         diag.too_few_points = len(scan) < cfg.filter.min_points
 
         T_deskew = T_guess  # the motion the scan is de-skewed with now
+        target = None  # what the scan was registered against
         if not st.poses:
             T = np.eye(4)
         elif diag.too_few_points or (st.target_scan is None and st.local_map is None):
             T = T_guess
         else:
-            T, T_deskew = self._align(scan, T_guess, period, deskewing, diag, seconds)
+            T, T_deskew, target = self._align(scan, T_guess, period, deskewing, diag, seconds)
         if true_motion is not None and st.poses:
             diag.estimated_motion = T
             T = np.asarray(true_motion, dtype=float)
 
-        self._update(scan, T, T_deskew, T_guess, clean.times_s if deskewing else None, period, diag, seconds)
+        self._update(scan, T, T_deskew, T_guess, clean.times_s if deskewing else None, period, diag, seconds,
+                     target)
         seconds["total"] = time.perf_counter() - t_start
         diag.seconds = seconds
         self.diagnostics.append(diag)
@@ -413,8 +415,9 @@ class Odometry:
 
     # ---- stages
     def _align(self, scan: FilteredScan, T_guess: np.ndarray, period: float, deskewing: bool,
-               diag: FrameDiagnostics, seconds: dict) -> tuple[np.ndarray, np.ndarray]:
-        """Register, refine the de-skew, check plausibility: (T_prev_cur, the motion the scan is de-skewed with)."""
+               diag: FrameDiagnostics, seconds: dict) -> tuple[np.ndarray, np.ndarray, Target]:
+        """Register, refine the de-skew, check plausibility: (T_prev_cur, the motion the scan is de-skewed with,
+        the target it was registered against)."""
         cfg, st = self.config, self.state
         first = len(st.poses) == 1
         # GCR bounds matches by the sensor's sampling spacing (cm to dm), so it needs a close
@@ -510,15 +513,17 @@ class Odometry:
                           or np.degrees(se3.rotation_angle(deviation)) > cfg.icp.max_prediction_error_deg):
             diag.implausible = True
             T = T_guess
-        return T, T_deskew
+        return T, T_deskew, target
 
     def _update(self, scan: FilteredScan, T: np.ndarray, T_deskew: np.ndarray, T_guess: np.ndarray,
-                raw_times_s: np.ndarray | None, period: float, diag: FrameDiagnostics, seconds: dict) -> None:
+                raw_times_s: np.ndarray | None, period: float, diag: FrameDiagnostics, seconds: dict,
+                target: Target | None = None) -> None:
         """Pose and motion; the scan, de-skewed with the motion just estimated, becomes the next
         target or joins the map, so that source and target share one motion model.
 
         T: this frame's motion T_prev_cur; T_deskew: the motion its filtered points are
-        de-skewed with now; T_guess: the one its raw points are; raw_times_s: (N,) or None.
+        de-skewed with now; T_guess: the one its raw points are; raw_times_s: (N,) or None;
+        target: what the scan was registered against (None: it was not).
         """
         cfg, st = self.config, self.state
         # (re-orthonormalised: with a map, T = previous^-1 x estimate feeds rounding back)
@@ -542,9 +547,24 @@ class Odometry:
         st.target_frame = len(st.poses) - 1
         st.target_motion = T if redo else T_deskew
         if st.local_map is not None:
-            st.local_map.update(map_points(scan, pose), pose[:3, 3])
+            points_world = map_points(scan, pose)
+            st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(points_world, target))
         stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
         seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t
+
+    def _map_nearest_m(self, points_world: np.ndarray, target: Target | None) -> np.ndarray | None:
+        """(N,) each world point's distance to its nearest map point, inf beyond the match bound, m: the
+        map's spacing check without a search of its own where the ICP's last one still holds
+        (``icp.match``: the points moved by millimetres since). None when ``target`` is not the map
+        as it stands, or the bound is below the map's point spacing (the answer would not decide)."""
+        st, bound = self.state, self.config.match.max_correspondence_distance_m
+        if (target is None or st.local_map is None or target.points is not st.local_map.points
+                or st.local_map.min_spacing_m > bound):
+            return None
+        m = match(points_world, target, bound)
+        nearest = np.full(len(points_world), np.inf)
+        nearest[m.source_index] = m.distance_m
+        return nearest
 
     def _target(self) -> Target:
         st = self.state

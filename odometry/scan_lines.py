@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels import fill_range_image
+
 
 def azimuth_columns(points: np.ndarray, n_columns: int) -> np.ndarray:
     """(N,) int column in [0, n_columns) of each (N, 3) point's azimuth ``atan2(y, x)`` (sensor frame)."""
@@ -43,9 +45,10 @@ def range_image(rings: np.ndarray, points: np.ndarray, n_rings: int, n_columns: 
     if len(rings) and (rings.min() < 0 or rings.max() >= n_rings):
         raise ValueError(f"ring {int(rings.max()) if rings.max() >= n_rings else int(rings.min())} is not "
                          f"one of the sensor's {n_rings} rings")
-    image = np.full((n_rings, n_columns), -1, dtype=np.int64)
-    image[rings, azimuth_columns(points, n_columns)] = np.arange(len(rings))
-    return image
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    if points.shape != (len(rings), 3):
+        raise ValueError(f"need ({len(rings)}, 3) points, one per ring, got {points.shape}")
+    return fill_range_image(rings, points, int(n_rings), int(n_columns))  # (one compiled pass, atan2 per point)
 
 
 def widen_one_ring_neighbourhoods(

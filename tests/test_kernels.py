@@ -195,3 +195,15 @@ def test_the_kernels_callers_refuse_what_the_kernels_cannot_check():
         voxel_keys(np.hstack([p, p[:, :1]]), 0.5)
     with pytest.raises(ValueError):
         voxel_centroids(p, 0.5, np.zeros(49))
+
+
+def test_fill_range_image_is_numpys_assignment_of_rows_to_cells():
+    from odometry.scan_lines import azimuth_columns
+
+    rng = np.random.default_rng(11)
+    points = rng.normal(size=(20000, 3)) * 20
+    points[:5, :2] = [[1.0, 0.0], [-1.0, 0.0], [-1.0, -0.0], [0.0, 1.0], [0.0, -1.0]]  # the seam and the axes
+    rings = rng.integers(0, 16, size=20000)
+    expect = np.full((16, 900), -1, dtype=np.int64)
+    expect[rings, azimuth_columns(points, 900)] = np.arange(20000)  # (repeated cells: the last row)
+    np.testing.assert_array_equal(kernels.fill_range_image(rings, points, 16, 900), expect)

@@ -74,6 +74,32 @@ def test_map_min_spacing_keeps_the_first_observation_of_a_surface():
     assert plain.update(grid + jitter, above).added == len(grid)
 
 
+def test_map_spacing_check_takes_the_distances_a_caller_knows():
+    """``update(nearest_m=...)``: the spacing check uses the given distances (the odometry passes its
+    last nearest-neighbour search, ``icp.match`` on the final points) and then agrees with its own search."""
+    rng = np.random.default_rng(12)
+    first = rng.uniform(0.0, 8.0, size=(3000, 3)) * [1.0, 1.0, 0.1]
+    later = first + rng.normal(scale=0.25, size=first.shape)
+    above = np.array([4.0, 4.0, 3.0])
+    searched, given = make_map(min_spacing_m=0.3), make_map(min_spacing_m=0.3)
+    searched.update(first, above)
+    given.update(first, above)
+    target = given.target()
+    m = match(later, target, 1.0)
+    nearest = np.full(len(later), np.inf)
+    nearest[m.source_index] = m.distance_m
+    stats = given.update(later, above, nearest_m=nearest)
+    assert stats == searched.update(later, above) and 0 < stats.added < len(later)
+    np.testing.assert_array_equal(given.points, searched.points)
+    with pytest.raises(ValueError):
+        given.update(later, above, nearest_m=nearest[:-1])
+    # the given distances are what decides: the same points again, said to be far, go in where room is
+    again = make_map(min_spacing_m=0.3)
+    again.update(first, above)
+    assert again.update(first, above).added == 0
+    assert again.update(first, above, nearest_m=np.full(len(first), np.inf)).added > 0
+
+
 def test_map_payload_follows_its_points_through_caps_and_pruning():
     """Each map point keeps the payload given with it: points arrive out of voxel order, full voxels
     refuse some, and a far voxel is dropped."""
