@@ -330,6 +330,14 @@ def group_sorted(keys: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.nd
     return distinct[:k + 1], slot
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _in_axes(V: np.ndarray, i: int, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """The vector (x, y, z) in the axes of ``V[i]`` (its columns): ``V[i]^T (x, y, z)``."""
+    return (x * V[i, 0, 0] + y * V[i, 1, 0] + z * V[i, 2, 0],
+            x * V[i, 0, 1] + y * V[i, 1, 1] + z * V[i, 2, 1],
+            x * V[i, 0, 2] + y * V[i, 1, 2] + z * V[i, 2, 2])
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def beam_noise_moments(P: np.ndarray, mean: np.ndarray, V: np.ndarray, beams: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -348,12 +356,8 @@ def beam_noise_moments(P: np.ndarray, mean: np.ndarray, V: np.ndarray, beams: np
         for j in range(k):
             dx, dy, dz = P[i, j, 0] - mean[i, 0], P[i, j, 1] - mean[i, 1], P[i, j, 2] - mean[i, 2]
             bx, by, bz = beams[i, j, 0], beams[i, j, 1], beams[i, j, 2]
-            a0 = dx * V[i, 0, 0] + dy * V[i, 1, 0] + dz * V[i, 2, 0]
-            a1 = dx * V[i, 0, 1] + dy * V[i, 1, 1] + dz * V[i, 2, 1]
-            h = dx * V[i, 0, 2] + dy * V[i, 1, 2] + dz * V[i, 2, 2]
-            c0 = bx * V[i, 0, 0] + by * V[i, 1, 0] + bz * V[i, 2, 0]
-            c1 = bx * V[i, 0, 1] + by * V[i, 1, 1] + bz * V[i, 2, 1]
-            c2 = bx * V[i, 0, 2] + by * V[i, 1, 2] + bz * V[i, 2, 2]
+            a0, a1, h = _in_axes(V, i, dx, dy, dz)
+            c0, c1, c2 = _in_axes(V, i, bx, by, bz)
             z0, z1 = h * c0 + a0 * c2, h * c1 + a1 * c2
             s00 += z0 * z0
             s01 += z0 * z1
@@ -386,12 +390,8 @@ def range_noise_moments(P: np.ndarray, mean: np.ndarray, V: np.ndarray, range_va
         for j in range(k):
             px, py, pz = P[i, j, 0], P[i, j, 1], P[i, j, 2]
             dx, dy, dz = px - mean[i, 0], py - mean[i, 1], pz - mean[i, 2]
-            pv0 = px * V[i, 0, 0] + py * V[i, 1, 0] + pz * V[i, 2, 0]
-            pv1 = px * V[i, 0, 1] + py * V[i, 1, 1] + pz * V[i, 2, 1]
-            pv2 = px * V[i, 0, 2] + py * V[i, 1, 2] + pz * V[i, 2, 2]
-            a0 = dx * V[i, 0, 0] + dy * V[i, 1, 0] + dz * V[i, 2, 0]
-            a1 = dx * V[i, 0, 1] + dy * V[i, 1, 1] + dz * V[i, 2, 1]
-            h = dx * V[i, 0, 2] + dy * V[i, 1, 2] + dz * V[i, 2, 2]
+            pv0, pv1, pv2 = _in_axes(V, i, px, py, pz)
+            a0, a1, h = _in_axes(V, i, dx, dy, dz)
             r2 = px * px + py * py + pz * pz
             beta_r2 = (range_var_m2 - angular_var_rad2 * r2) / r2
             y0, y1 = a0 * pv2 + h * pv0, a1 * pv2 + h * pv1
