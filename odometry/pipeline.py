@@ -9,6 +9,10 @@
     init       linear extrapolation: the last relative motion
     align      ICP: match in the previous scan or the local map, reject, point-to-plane, until converged
     update     pose_i = pose_{i-1} T_{i-1,i}; remember the motion; this scan becomes the target / joins the map
+
+Clean and filter read no state (``Odometry.prepare``); the rest does (``Odometry.register_prepared``).
+``register_frames`` (and ``run_sequence`` over it) prepares the next scans on threads of their own
+while the current one registers: the same poses, both cores at work.
 """
 
 from __future__ import annotations
@@ -16,9 +20,14 @@ from __future__ import annotations
 import csv
 import logging
 import math
+import os
 import time
+from collections import deque
+from collections.abc import Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -245,6 +254,24 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
 
 
 @dataclass
+class PreparedScan:
+    """A scan cleaned and filtered as measured, before any state is used (``Odometry.prepare``).
+
+    clean: its clean points. scan: its ICP points as measured (None until the filter has run:
+    with per-point times and a raw target, ``register_prepared`` de-skews first). deskewing: per-point
+    times are known and the de-skew is on. diag, seconds: the frame's diagnostics and stage times so
+    far. seconds_spent: the time its preparation took, s (counted in the frame's total).
+    """
+
+    clean: CleanScan
+    scan: FilteredScan | None
+    deskewing: bool
+    diag: FrameDiagnostics
+    seconds: dict
+    seconds_spent: float
+
+
+@dataclass
 class OdometryState:
     """What the odometry carries from frame to frame.
 
@@ -351,16 +378,24 @@ class Odometry:
         the error a registration makes from the drift its errors feed back
         (``tools.open_loop``).
         """
-        cfg, st = self.config, self.state
+        prepared = self.prepare(points, times_s, rings, first=not self.state.poses)
+        return self.register_prepared(prepared, stamp_s=stamp_s, true_motion=true_motion)
+
+    def prepare(self, points: np.ndarray, times_s: np.ndarray | None = None, rings: np.ndarray | None = None,
+                first: bool = False) -> PreparedScan:
+        """Clean and filter a scan as measured: the part of ``register`` that needs no state.
+
+        points: (N, 3) m; times_s, rings: (N,) or None, as ``register`` takes them. first: the
+        sequence's first scan (a map variant with ``map.cold_start_target: scan`` gives it normals).
+        Reads only the config and the sensor, so it may run on another thread while ``register_prepared``
+        registers the previous scan (``register_frames``). With per-point times and a raw target the
+        filter needs the de-skewed points: it is left to ``register_prepared``.
+        """
+        cfg = self.config
         t_start = time.perf_counter()
-        diag = FrameDiagnostics(frame=len(st.poses))
+        diag = FrameDiagnostics(frame=-1)
         seconds: dict[str, float] = {}
-
         clean = clean_scan(points, times_s, rings, cfg, diag)
-        period = self._frame_period(stamp_s)
-        T_guess = self._predicted_motion(period)
-
-        t = time.perf_counter()
         deskewing = cfg.deskew.enabled and clean.times_s is not None
         # The scan is voxelised and its normals and NCF computed as measured, and then its ICP points,
         # normals and centroids are de-skewed, each with its voxel's mean firing time: a voxel's and
@@ -368,24 +403,50 @@ class Odometry:
         # so they move rigidly, and the beams the NCF's noise follows start at the sensor's origin
         # only in the measured frame. Far fewer points to move. (A raw target keeps every de-skewed point.)
         filter_first = deskewing and cfg.match.target != "raw"
-        if deskewing and not filter_first:
-            clean.points = deskew(clean.points, clean.times_s, T_guess, period)
-        diag.deskewed = deskewing
-        seconds["deskew"] = time.perf_counter() - t
+        prepared = PreparedScan(clean, None, deskewing, diag, seconds, 0.0)
+        if not deskewing or filter_first:
+            self._filter(prepared, first)
+        prepared.seconds_spent = time.perf_counter() - t_start
+        return prepared
 
+    def _filter(self, prepared: PreparedScan, first: bool) -> None:
+        """The filter stage of ``prepare``: ``prepared.scan`` from its clean points."""
+        cfg, clean = self.config, prepared.clean
         # (with map.cold_start_target: scan, a map variant's first scan gets its own normals: ``_cold_start_target``)
-        normals = scan_normals_needed(cfg) or (self._scan_cold_start and not st.poses)
+        normals = scan_normals_needed(cfg) or (self._scan_cold_start and first)
         rings_needed = cfg.gcr.enabled or cfg.filter.adjacent_ring_reach_m is not None
         if clean.rings is None and rings_needed and normals and self.sensor is not None:
             clean.rings = ring_of_points(clean.points, self.sensor)
         scan = filter_scan(clean.points, cfg, clean.rings, self.sensor,
-                           raw_times_s=clean.times_s if deskewing else None, with_normals=normals)
-        if filter_first:
-            t = time.perf_counter()
-            redeskew_scan(scan, np.eye(4), T_guess, period, centroids_motion=np.eye(4))
-            seconds["deskew"] += time.perf_counter() - t
-        diag.filter_counts = scan.counts
-        seconds.update(scan.seconds)
+                           raw_times_s=clean.times_s if prepared.deskewing else None, with_normals=normals)
+        prepared.diag.filter_counts = scan.counts
+        prepared.seconds.update(scan.seconds)
+        prepared.scan = scan
+
+    def register_prepared(self, prepared: PreparedScan, stamp_s: float | None = None,
+                          true_motion: np.ndarray | None = None) -> np.ndarray:
+        """``register`` of a scan ``prepare`` cleaned and filtered (once: its scan is de-skewed in place)."""
+        cfg, st = self.config, self.state
+        t_start = time.perf_counter()
+        diag = prepared.diag
+        diag.frame = len(st.poses)
+        seconds = prepared.seconds
+        clean = prepared.clean
+        period = self._frame_period(stamp_s)
+        T_guess = self._predicted_motion(period)
+        deskewing = prepared.deskewing
+        diag.deskewed = deskewing
+
+        t = time.perf_counter()
+        if prepared.scan is None:  # de-skewed before the filter (a raw target keeps every de-skewed point)
+            clean.points = deskew(clean.points, clean.times_s, T_guess, period)
+            seconds["deskew"] = time.perf_counter() - t
+            self._filter(prepared, first=not st.poses)
+        else:
+            if deskewing:  # filtered as measured: its ICP points, normals and centroids follow the motion
+                redeskew_scan(prepared.scan, np.eye(4), T_guess, period, centroids_motion=np.eye(4))
+            seconds["deskew"] = time.perf_counter() - t
+        scan = prepared.scan
         diag.too_few_points = len(scan) < cfg.filter.min_points
 
         T_deskew = T_guess  # the motion the scan is de-skewed with now
@@ -402,7 +463,8 @@ class Odometry:
 
         self._update(scan, T, T_deskew, T_guess, clean.times_s if deskewing else None, period, diag, seconds,
                      target)
-        seconds["total"] = time.perf_counter() - t_start
+        # (a frame's time includes its preparation, wherever it ran)
+        seconds["total"] = time.perf_counter() - t_start + prepared.seconds_spent
         diag.seconds = seconds
         self.diagnostics.append(diag)
         if diag.extrapolated:
@@ -677,6 +739,83 @@ def stretches_of(frames: np.ndarray, weak: np.ndarray, directions: np.ndarray, e
 
 
 # ---------------------------------------------------------------- sequences and files
+class ScanInput(NamedTuple):
+    """One scan for ``register_frames``: ``Odometry.register``'s arguments.
+
+    points: (N, 3) m; times_s, rings: (N,) or None; stamp_s: the sweep's start, s, or None;
+    true_motion: (4, 4) or None (an open-loop run).
+    """
+
+    points: np.ndarray
+    times_s: np.ndarray | None = None
+    rings: np.ndarray | None = None
+    stamp_s: float | None = None
+    true_motion: np.ndarray | None = None
+
+
+# Scans prepared ahead by default (``register_frames``): two threads preparing the next two scans beside
+# the registration keep two cores busy where one preparation takes longer than a registration (scan-to-scan
+# SALO's normals and NCF); one ahead left the registering thread waiting (README, "Benchmarks").
+PREFETCH_SCANS = 2
+
+_prefetchers: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _prefetcher(threads: int) -> ThreadPoolExecutor:
+    """This process's threads that prepare the scans ahead (a forked child gets its own).
+
+    Not ``filters.background()``: a preparation waits on the k-d tree builds queued there.
+    """
+    key = (os.getpid(), threads)
+    if key not in _prefetchers:
+        _prefetchers[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="prepare")
+    return _prefetchers[key]
+
+
+def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int = PREFETCH_SCANS
+                    ) -> Iterator[np.ndarray]:
+    """Register ``scans`` in order with ``odometry``; yield each pose ``T_world_lidar`` (4, 4).
+
+    prefetch: scans prepared ahead (``Odometry.prepare``: clean, voxel grid, normals, NCF), each on
+    a thread of its own, while this thread registers the current one (0: none, one thing at a
+    time). The poses are those of ``Odometry.register`` frame after frame: a preparation reads no
+    state. ``scans`` is advanced by this thread only; an error it raises (a file that cannot be
+    read) comes after the poses of the scans before it.
+    """
+    it = iter(scans)
+    pool = _prefetcher(prefetch) if prefetch > 0 else None
+    pending: deque = deque()  # (scan, its preparation: a future, or None to prepare here, first?), in order
+    first = not odometry.state.poses
+    ended = False  # the scans are exhausted, or raised ``error``
+    error: Exception | None = None
+
+    def top_up() -> None:
+        nonlocal first, ended, error
+        while not ended and len(pending) < max(prefetch, 1):
+            try:
+                scan = next(it)
+            except StopIteration:
+                ended = True
+                return
+            except Exception as exc:  # noqa: BLE001 - raised in its turn, after the poses before it
+                ended, error = True, exc
+                return
+            job = None if pool is None else pool.submit(odometry.prepare, scan.points, scan.times_s, scan.rings,
+                                                        first=first)
+            pending.append((scan, job, first))
+            first = False
+
+    top_up()
+    while pending:
+        scan, job, is_first = pending.popleft()
+        prepared = (job.result() if job is not None
+                    else odometry.prepare(scan.points, scan.times_s, scan.rings, first=is_first))
+        top_up()  # (the next preparations start before this registration)
+        yield odometry.register_prepared(prepared, stamp_s=scan.stamp_s, true_motion=scan.true_motion)
+    if error is not None:
+        raise error
+
+
 @dataclass
 class OdometryRun:
     """Poses (N, 4, 4) ``T_first_lidar`` of the frames run, their indices, times and diagnostics."""
@@ -700,12 +839,14 @@ def run_sequence(
     frames: slice | None = None,
     on_frame=None,
     true_poses: np.ndarray | None = None,
+    prefetch: int = PREFETCH_SCANS,
 ) -> OdometryRun:
     """Run the odometry over (a slice of) a sequence; ``on_frame(k, diagnostics)`` after each frame.
 
     The poses are relative to the first frame run. The sensor defaults to the sequence's own.
     true_poses: (F, 4, 4) the sequence's true poses, for an open-loop run (``Odometry.register``'s
     ``true_motion``): the state follows the truth, each frame's estimate is in its diagnostics.
+    prefetch: scans prepared ahead on threads of their own (``register_frames``; 0: none).
     """
     sensor = sensor or sequence.sensor
     idx = np.arange(len(sequence))[frames or slice(None)]
@@ -714,13 +855,16 @@ def run_sequence(
     if true_poses is not None and len(true_poses) != len(sequence):
         raise OdometryError(f"{sequence.path}: {len(true_poses)} true poses for {len(sequence)} frames")
     odo = Odometry(config, sensor)
+
+    def scans() -> Iterator[ScanInput]:
+        for j, k in enumerate(idx):
+            frame = sequence[int(k)]
+            stamp = float(sequence.times[k]) if sequence.times is not None and k < len(sequence.times) else None
+            truth = None if true_poses is None or j == 0 else se3.inverse(true_poses[idx[j - 1]]) @ true_poses[k]
+            yield ScanInput(frame.points, deskew_times(sequence, frame), frame.ring, stamp, truth)
+
     t0 = time.perf_counter()
-    for j, k in enumerate(idx):
-        frame = sequence[int(k)]
-        stamp = float(sequence.times[k]) if sequence.times is not None and k < len(sequence.times) else None
-        truth = None if true_poses is None or j == 0 else se3.inverse(true_poses[idx[j - 1]]) @ true_poses[k]
-        odo.register(frame.points, times_s=deskew_times(sequence, frame), rings=frame.ring, stamp_s=stamp,
-                     true_motion=truth)
+    for k, _ in zip(idx, register_frames(odo, scans(), prefetch), strict=True):
         if on_frame is not None:
             on_frame(int(k), odo.last)
     times = None if sequence.times is None else np.asarray(sequence.times)[idx]
@@ -738,4 +882,5 @@ def write_diagnostics_csv(path: str | Path, diagnostics: list[FrameDiagnostics])
     atomic_write_text(path, buf.getvalue())
 
 
-__all__ = ["DegenerateStretch", "Odometry", "OdometryError", "degenerate_stretches", "run_sequence", "stretches_of"]
+__all__ = ["DegenerateStretch", "Odometry", "OdometryError", "PreparedScan", "ScanInput", "degenerate_stretches",
+           "register_frames", "run_sequence", "stretches_of"]

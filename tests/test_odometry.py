@@ -11,7 +11,7 @@ from odometry.gcr import gcr_threshold_m
 from odometry.icp import Source, Target, register
 from odometry.kdtree import KDTree
 from odometry.metrics import evaluate_trajectory
-from odometry.pipeline import run_sequence
+from odometry.pipeline import Odometry, ScanInput, register_frames, run_sequence
 from simlidar import se3
 from simlidar.dataset import open_sequence
 from simlidar.sensor import load_preset
@@ -254,3 +254,38 @@ def test_capped_refinements_take_fewer_iterations_and_stay_on_the_truth(city_seq
     assert iterations[1] <= iterations[None] - 1.5, iterations
     # (measured: 7.1 against 5.2 iterations a frame; largest position error 2.05 against 2.02 cm over 60 frames)
     assert errors[None] < 0.05 and errors[1] < 1.25 * errors[None] + 0.005, errors
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["salo", DEFAULT_VARIANT])
+def test_prefetching_the_next_scan_gives_the_poses_of_one_frame_after_another(city_sequence, name):
+    """``run_sequence`` prepares the next scans on threads of their own (``register_frames``): the poses
+    are those of ``Odometry.register`` called frame after frame, to the last bit, and on the truth."""
+    gt, frames = city_sequence.poses, slice(0, 30)
+    runs = [run_sequence(city_sequence, variant(name), frames=frames, prefetch=p) for p in (2, 1, 0)]
+    assert np.array_equal(runs[0].poses, runs[2].poses) and np.array_equal(runs[1].poses, runs[2].poses)
+    rel = se3.inverse(gt[0]) @ gt[frames]
+    assert np.linalg.norm(runs[0].poses[:, :3, 3] - rel[:, :3, 3], axis=1).max() < 0.05
+    assert [d.frame for d in runs[0].diagnostics] == list(range(30))
+
+
+def test_a_scan_that_cannot_be_read_stops_the_run_with_its_own_error(city):
+    """An error while reading a scan ahead reaches the caller as it is, after the poses of the scans
+    before it."""
+    world, traj = city
+    sim = SweepSimulator(world, SENSOR, seed=1, motion_distortion=False)
+    sweeps = [sim.sweep(traj, 5.0 + 0.1 * k, k) for k in range(3)]
+
+    def scans():
+        for s in sweeps:
+            yield ScanInput(s.xyz, None, s.ring)
+        raise OSError("frame 3: truncated file")
+
+    odo = Odometry(variant(DEFAULT_VARIANT), SENSOR)
+    poses = []
+    with pytest.raises(OSError, match="frame 3: truncated file"):
+        for pose in register_frames(odo, scans()):
+            poses.append(pose)
+    assert len(poses) == 3 and len(odo.poses) == 3
+    true_step = se3.inverse(traj.pose_at(np.array([5.0]))[0]) @ traj.pose_at(np.array([5.1]))[0]
+    assert np.linalg.norm(poses[1][:3, 3] - true_step[:3, 3]) < 0.05

@@ -4,6 +4,7 @@
     python -m tools.bench_odometry --frames 200 --scene suburb --sensors hdl32e
     python -m tools.bench_odometry --methods kiss-icp,salo,default --set map.min_point_spacing_m=0
     python -m tools.bench_odometry --methods kiss-icp,default,salo --repeat 3   # 3 interleaved rounds, medians
+    python -m tools.bench_odometry --prefetch both   # ours also on one thread (no scan prepared ahead)
 
 For each sensor the sequence is simulated once into memory (``simlidar.in_memory``,
 motion distortion on, per-point times given: the frames every method gets), then
@@ -30,12 +31,14 @@ import numpy as np
 
 from odometry.config import DEFAULT_VARIANT, ConfigError, changes_from_assignments, config_from_dict, variant
 from odometry.metrics import evaluate_trajectory
-from odometry.pipeline import STAGES, Odometry
+from odometry.pipeline import PREFETCH_SCANS, STAGES, Odometry, ScanInput, register_frames
 from simlidar.sequence import deskew_times
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
 
 OURS = ("bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
 REFERENCE_PEER = "kiss-icp"
+# --prefetch: which ways each of ours runs (``odometry.pipeline.register_frames``)
+PREFETCH_CHOICES = {"on": (PREFETCH_SCANS,), "off": (0,), "both": (PREFETCH_SCANS, 0)}
 
 
 def simulate(scene: str, sensor: str, frames: int, seed: int = 0, start_s: float = 5.0):
@@ -65,16 +68,17 @@ def t_err_pct(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, bool]:
     return evaluate_trajectory(T_gt, T_est, lengths_m=SHORT_SEGMENTS_M).t_err_pct, True
 
 
-def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = None
-             ) -> tuple[np.ndarray, float, dict]:
+def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = None,
+             prefetch: int = PREFETCH_SCANS) -> tuple[np.ndarray, float, dict]:
     """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` over the sequence's frames.
     changes: parameters changed (``--set``), nested by stage as a config YAML holds them."""
     odo = Odometry(config_from_dict(changes or {}, base=variant(name)), seq.sensor)
     n = len(seq) if frames is None else frames
     data = [seq[k] for k in range(n)]
+    scans = [ScanInput(f.points, deskew_times(seq, f), f.ring, float(seq.times[k])) for k, f in enumerate(data)]
     t = time.perf_counter()
-    for k, f in enumerate(data):
-        odo.register(f.points, times_s=deskew_times(seq, f), rings=f.ring, stamp_s=float(seq.times[k]))
+    for _ in register_frames(odo, scans, prefetch):
+        pass
     seconds = time.perf_counter() - t
     stages = {s: 1000 * np.mean([d.seconds.get(s, 0.0) for d in odo.diagnostics[1:]]) for s in STAGES}
     return np.stack(odo.poses), seconds, stages
@@ -90,11 +94,12 @@ def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None) -> 
 
 
 def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[str] | None = None,
-          changes: dict | None = None, repeat: int = 1) -> None:
+          changes: dict | None = None, repeat: int = 1, prefetch: tuple[int, ...] = (PREFETCH_SCANS,)) -> None:
     """Run every method over the same frames ``repeat`` times, interleaved (one round runs each
     method once), and print one row per method: median frames/s, median over rounds of its time
     over KISS-ICP's in the same round (a machine whose speed drifts moves both alike), t_err and
-    stage times (ms per frame, median over rounds)."""
+    stage times (ms per frame, median over rounds). prefetch: each of ours runs once per value, with
+    that many scans prepared ahead on threads of their own (``register_frames``; 0: one thread)."""
     seq = simulate(scene, sensor, frames)
     points = np.mean([len(p) for p in seq.points])
     path_m = float(evaluate_trajectory(seq.poses, seq.poses).path_length_m)
@@ -119,8 +124,9 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
         if only and name not in only:
             continue
         v = DEFAULT_VARIANT if name == "default" else name
-        methods.append((f"default ({v})" if name == "default" else name, v,
-                        lambda v=v: run_ours(seq, v, changes=changes)))
+        for p in prefetch:
+            label = (f"default ({v})" if name == "default" else name) + ("" if p else ", 1 thread")
+            methods.append((label, v, lambda v=v, p=p: run_ours(seq, v, changes=changes, prefetch=p)))
         # (a warm-up on three frames, untimed: the compiled kernels are loaded, or compiled on a
         # fresh install, before the clock runs, as the peers' code is compiled ahead)
         run_ours(seq, v, frames=min(3, len(seq)), changes=changes)
@@ -162,6 +168,9 @@ def main() -> None:
     ap.add_argument("--memory-frames", type=int, default=20, help="frames of the peak-memory run (0: none)")
     ap.add_argument("--methods", default="", help="comma-separated subset of the methods (default: all); "
                     "kiss-icp is the ratios' reference")
+    ap.add_argument("--prefetch", choices=PREFETCH_CHOICES, default="on",
+                    help="ours with the next scans prepared ahead on threads of their own (on, as salo "
+                    "odometry runs), on one thread (off), or a row of each (both)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="an odometry parameter changed for every variant of ours (dotted, repeatable)")
     args = ap.parse_args()
@@ -176,9 +185,12 @@ def main() -> None:
     if only and only - known:
         ap.error(f"unknown method(s) {', '.join(sorted(only - known))} (known: {', '.join(sorted(known))})")
     for sensor in args.sensors.split(","):
-        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only, changes, args.repeat)
+        bench(args.scene, sensor.strip(), args.frames, args.memory_frames, only, changes, args.repeat,
+              PREFETCH_CHOICES[args.prefetch])
     print("\n(/KISS: the method's time over KISS-ICP's on the same frames in this run, below 1 = faster; stage "
-          "columns: ms per frame, 'other' the rest (cleaning, waiting for a k-d tree); the de-skew includes "
+          "columns: ms per frame, 'other' the rest (cleaning, waiting for a k-d tree; negative when the next "
+          "scans' voxel grid, normals and NCF, prepared ahead on other threads, took longer than the wait for them); "
+          "', 1 thread': without that prefetch; the de-skew includes "
           "the refinements; peak MB: traced allocation peak over the first --memory-frames frames; t_err %: "
           "KITTI's, over 100-800 m segments; *: the path is shorter than 100 m, over 10-50 m segments)")
 
