@@ -757,6 +757,22 @@ class ScanInput(NamedTuple):
 # the registration keep two cores busy where one preparation takes longer than a registration (scan-to-scan
 # SALO's normals and NCF); one ahead left the registering thread waiting (README, "Benchmarks").
 PREFETCH_SCANS = 2
+# The environment variable that overrides it (a worker pool whose processes have a core each sets 0).
+PREFETCH_ENV = "SALO_PREFETCH_SCANS"
+
+
+def default_prefetch() -> int:
+    """Scans prepared ahead when the caller does not say: ``$SALO_PREFETCH_SCANS``, else ``PREFETCH_SCANS``."""
+    text = os.environ.get(PREFETCH_ENV)
+    if text is None or not text.strip():
+        return PREFETCH_SCANS
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise OdometryError(f"environment variable {PREFETCH_ENV}={text!r}: expected a whole number of scans >= 0")
+    return value
 
 _prefetchers: dict[tuple[int, int], ThreadPoolExecutor] = {}
 
@@ -772,17 +788,18 @@ def _prefetcher(threads: int) -> ThreadPoolExecutor:
     return _prefetchers[key]
 
 
-def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int = PREFETCH_SCANS
+def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int | None = None
                     ) -> Iterator[np.ndarray]:
     """Register ``scans`` in order with ``odometry``; yield each pose ``T_world_lidar`` (4, 4).
 
     prefetch: scans prepared ahead (``Odometry.prepare``: clean, voxel grid, normals, NCF), each on
     a thread of its own, while this thread registers the current one (0: none, one thing at a
-    time). The poses are those of ``Odometry.register`` frame after frame: a preparation reads no
-    state. ``scans`` is advanced by this thread only; an error it raises (a file that cannot be
-    read) comes after the poses of the scans before it.
+    time; None: ``default_prefetch()``). The poses are those of ``Odometry.register`` frame after
+    frame: a preparation reads no state. ``scans`` is advanced by this thread only; an error it
+    raises (a file that cannot be read) comes after the poses of the scans before it.
     """
     it = iter(scans)
+    prefetch = default_prefetch() if prefetch is None else prefetch
     pool = _prefetcher(prefetch) if prefetch > 0 else None
     pending: deque = deque()  # (scan, its preparation: a future, or None to prepare here, first?), in order
     first = not odometry.state.poses
@@ -839,14 +856,14 @@ def run_sequence(
     frames: slice | None = None,
     on_frame=None,
     true_poses: np.ndarray | None = None,
-    prefetch: int = PREFETCH_SCANS,
+    prefetch: int | None = None,
 ) -> OdometryRun:
     """Run the odometry over (a slice of) a sequence; ``on_frame(k, diagnostics)`` after each frame.
 
     The poses are relative to the first frame run. The sensor defaults to the sequence's own.
     true_poses: (F, 4, 4) the sequence's true poses, for an open-loop run (``Odometry.register``'s
     ``true_motion``): the state follows the truth, each frame's estimate is in its diagnostics.
-    prefetch: scans prepared ahead on threads of their own (``register_frames``; 0: none).
+    prefetch: scans prepared ahead on threads of their own (``register_frames``; 0: none; None: the default).
     """
     sensor = sensor or sequence.sensor
     idx = np.arange(len(sequence))[frames or slice(None)]

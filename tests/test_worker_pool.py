@@ -7,6 +7,7 @@ from concurrent.futures import wait
 
 import pytest
 
+from odometry.pipeline import PREFETCH_ENV, PREFETCH_SCANS, OdometryError, default_prefetch
 from tools.worker_pool import openmp_threads_per_worker, spawned_pool
 
 
@@ -23,6 +24,28 @@ def test_workers_inherit_their_share_and_the_driver_keeps_its_environment(monkey
         seen = pool.submit(os.getenv, "OMP_NUM_THREADS").result()
     assert seen == str(openmp_threads_per_worker(2))
     assert "OMP_NUM_THREADS" not in os.environ
+
+
+def test_workers_with_a_core_each_prepare_no_scans_ahead(monkeypatch):
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.delenv(PREFETCH_ENV, raising=False)
+    for workers in (1, 2):
+        with spawned_pool(workers) as pool:
+            seen = pool.submit(default_prefetch).result()
+        assert seen == (0 if openmp_threads_per_worker(workers) < 2 else PREFETCH_SCANS), workers
+        assert PREFETCH_ENV not in os.environ
+    monkeypatch.setenv(PREFETCH_ENV, "3")  # the user's choice is kept
+    with spawned_pool(2) as pool:
+        assert pool.submit(default_prefetch).result() == 3
+
+
+def test_a_bad_prefetch_setting_names_the_variable(monkeypatch):
+    monkeypatch.setenv(PREFETCH_ENV, "two")
+    with pytest.raises(OdometryError, match="SALO_PREFETCH_SCANS='two'"):
+        default_prefetch()
+    monkeypatch.setenv(PREFETCH_ENV, "-1")
+    with pytest.raises(OdometryError, match="whole number"):
+        default_prefetch()
 
 
 def test_a_users_thread_count_is_kept(monkeypatch):
