@@ -753,18 +753,24 @@ class ScanInput(NamedTuple):
     true_motion: np.ndarray | None = None
 
 
-# Scans prepared ahead by default (``register_frames``): two threads preparing the next two scans beside
-# the registration keep two cores busy where one preparation takes longer than a registration (scan-to-scan
-# SALO's normals and NCF); one ahead left the registering thread waiting (README, "Benchmarks").
+# Scans prepared ahead by default (``register_frames``). Where a scan's preparation holds its normals and
+# NCF (scan-to-scan, about as long as its registration) two threads preparing the next two keep both cores
+# busy; one ahead left the registering thread waiting. Where it is a voxel grid only (the map variants:
+# their normals are the map's) one ahead: on 100 city frames the default ran 10-20 % faster so on hdl32e,
+# 5-8 % slower on salo32, and two ahead no faster than none (README, "Benchmarks").
 PREFETCH_SCANS = 2
-# The environment variable that overrides it (a worker pool whose processes have a core each sets 0).
+PREFETCH_SCANS_WITHOUT_NORMALS = 1
+# The environment variable that overrides both (a worker pool whose processes have a core each sets 0).
 PREFETCH_ENV = "SALO_PREFETCH_SCANS"
 
 
-def default_prefetch() -> int:
-    """Scans prepared ahead when the caller does not say: ``$SALO_PREFETCH_SCANS``, else ``PREFETCH_SCANS``."""
+def default_prefetch(config: OdometryConfig | None = None) -> int:
+    """Scans prepared ahead when the caller does not say: ``$SALO_PREFETCH_SCANS``, else ``PREFETCH_SCANS``
+    (``PREFETCH_SCANS_WITHOUT_NORMALS`` for a ``config`` whose scans get no normals of their own)."""
     text = os.environ.get(PREFETCH_ENV)
     if text is None or not text.strip():
+        if config is not None and not scan_normals_needed(config):
+            return PREFETCH_SCANS_WITHOUT_NORMALS
         return PREFETCH_SCANS
     try:
         value = int(text)
@@ -773,6 +779,7 @@ def default_prefetch() -> int:
     if value < 0:
         raise OdometryError(f"environment variable {PREFETCH_ENV}={text!r}: expected a whole number of scans >= 0")
     return value
+
 
 _prefetchers: dict[tuple[int, int], ThreadPoolExecutor] = {}
 
@@ -794,12 +801,12 @@ def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: in
 
     prefetch: scans prepared ahead (``Odometry.prepare``: clean, voxel grid, normals, NCF), each on
     a thread of its own, while this thread registers the current one (0: none, one thing at a
-    time; None: ``default_prefetch()``). The poses are those of ``Odometry.register`` frame after
+    time; None: ``default_prefetch`` of its config). The poses are those of ``Odometry.register`` frame after
     frame: a preparation reads no state. ``scans`` is advanced by this thread only; an error it
     raises (a file that cannot be read) comes after the poses of the scans before it.
     """
     it = iter(scans)
-    prefetch = default_prefetch() if prefetch is None else prefetch
+    prefetch = default_prefetch(odometry.config) if prefetch is None else prefetch
     pool = _prefetcher(prefetch) if prefetch > 0 else None
     pending: deque = deque()  # (scan, its preparation: a future, or None to prepare here, first?), in order
     first = not odometry.state.poses

@@ -7,7 +7,14 @@ from concurrent.futures import wait
 
 import pytest
 
-from odometry.pipeline import PREFETCH_ENV, PREFETCH_SCANS, OdometryError, default_prefetch
+from odometry.config import variant
+from odometry.pipeline import (
+    PREFETCH_ENV,
+    PREFETCH_SCANS,
+    PREFETCH_SCANS_WITHOUT_NORMALS,
+    OdometryError,
+    default_prefetch,
+)
 from tools.worker_pool import openmp_threads_per_worker, spawned_pool
 
 
@@ -37,6 +44,16 @@ def test_workers_with_a_core_each_prepare_no_scans_ahead(monkeypatch):
     monkeypatch.setenv(PREFETCH_ENV, "3")  # the user's choice is kept
     with spawned_pool(2) as pool:
         assert pool.submit(default_prefetch).result() == 3
+
+
+def test_scans_prepared_ahead_follow_what_a_preparation_holds(monkeypatch):
+    """Two ahead where a scan's preparation has its normals and NCF (scan to scan), one where it is a
+    voxel grid (the map variants); the environment variable overrides both."""
+    monkeypatch.delenv(PREFETCH_ENV, raising=False)
+    assert default_prefetch(variant("salo")) == PREFETCH_SCANS == 2
+    assert default_prefetch(variant("salo-map")) == PREFETCH_SCANS_WITHOUT_NORMALS == 1
+    monkeypatch.setenv(PREFETCH_ENV, "0")
+    assert default_prefetch(variant("salo")) == default_prefetch(variant("salo-map")) == 0
 
 
 def test_a_bad_prefetch_setting_names_the_variable(monkeypatch):

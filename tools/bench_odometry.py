@@ -31,14 +31,14 @@ import numpy as np
 
 from odometry.config import DEFAULT_VARIANT, ConfigError, changes_from_assignments, config_from_dict, variant
 from odometry.metrics import evaluate_trajectory
-from odometry.pipeline import PREFETCH_SCANS, STAGES, Odometry, ScanInput, register_frames
+from odometry.pipeline import STAGES, Odometry, ScanInput, register_frames
 from simlidar.sequence import deskew_times
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
 
 OURS = ("bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
 REFERENCE_PEER = "kiss-icp"
 # --prefetch: which ways each of ours runs (``odometry.pipeline.register_frames``)
-PREFETCH_CHOICES = {"on": (PREFETCH_SCANS,), "off": (0,), "both": (PREFETCH_SCANS, 0)}
+PREFETCH_CHOICES = {"on": (None,), "off": (0,), "both": (None, 0)}
 
 
 def simulate(scene: str, sensor: str, frames: int, seed: int = 0, start_s: float = 5.0):
@@ -69,7 +69,7 @@ def t_err_pct(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, bool]:
 
 
 def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = None,
-             prefetch: int = PREFETCH_SCANS) -> tuple[np.ndarray, float, dict]:
+             prefetch: int | None = None) -> tuple[np.ndarray, float, dict]:
     """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` over the sequence's frames.
     changes: parameters changed (``--set``), nested by stage as a config YAML holds them."""
     odo = Odometry(config_from_dict(changes or {}, base=variant(name)), seq.sensor)
@@ -94,12 +94,13 @@ def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None) -> 
 
 
 def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[str] | None = None,
-          changes: dict | None = None, repeat: int = 1, prefetch: tuple[int, ...] = (PREFETCH_SCANS,)) -> None:
+          changes: dict | None = None, repeat: int = 1, prefetch: tuple[int | None, ...] = (None,)) -> None:
     """Run every method over the same frames ``repeat`` times, interleaved (one round runs each
     method once), and print one row per method: median frames/s, median over rounds of its time
     over KISS-ICP's in the same round (a machine whose speed drifts moves both alike), t_err and
     stage times (ms per frame, median over rounds). prefetch: each of ours runs once per value, with
-    that many scans prepared ahead on threads of their own (``register_frames``; 0: one thread)."""
+    that many scans prepared ahead on threads of their own (``register_frames``; 0: one thread; None:
+    as ``salo odometry`` runs it)."""
     seq = simulate(scene, sensor, frames)
     points = np.mean([len(p) for p in seq.points])
     path_m = float(evaluate_trajectory(seq.poses, seq.poses).path_length_m)
@@ -125,7 +126,8 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
             continue
         v = DEFAULT_VARIANT if name == "default" else name
         for p in prefetch:
-            label = (f"default ({v})" if name == "default" else name) + ("" if p else ", 1 thread")
+            how = "" if p is None else ", 1 thread" if p == 0 else f", {p} ahead"
+            label = (f"default ({v})" if name == "default" else name) + how
             methods.append((label, v, lambda v=v, p=p: run_ours(seq, v, changes=changes, prefetch=p)))
         # (a warm-up on three frames, untimed: the compiled kernels are loaded, or compiled on a
         # fresh install, before the clock runs, as the peers' code is compiled ahead)
