@@ -801,9 +801,10 @@ def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: in
 
     prefetch: scans prepared ahead (``Odometry.prepare``: clean, voxel grid, normals, NCF), each on
     a thread of its own, while this thread registers the current one (0: none, one thing at a
-    time; None: ``default_prefetch`` of its config). The poses are those of ``Odometry.register`` frame after
-    frame: a preparation reads no state. ``scans`` is advanced by this thread only; an error it
-    raises (a file that cannot be read) comes after the poses of the scans before it.
+    time; None: ``default_prefetch`` of the odometry's config). The poses are those of
+    ``Odometry.register`` frame after frame: a preparation reads no state. ``scans`` is advanced
+    by this thread only; an error it raises (a file that cannot be read) comes after the poses
+    of the scans before it.
     """
     it = iter(scans)
     prefetch = default_prefetch(odometry.config) if prefetch is None else prefetch
