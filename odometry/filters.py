@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -28,18 +29,22 @@ from .normals import knn, neighbourhood_pca
 from .scan_lines import widen_one_ring_neighbourhoods
 from .voxels import first_per_voxel, voxel_centroids
 
-_background: dict[int, ThreadPoolExecutor] = {}
+_background: dict[tuple[int, str], ThreadPoolExecutor] = {}
+_background_lock = threading.Lock()
 
 
-def background() -> ThreadPoolExecutor:
-    """This process's background thread for k-d tree builds (a forked child gets its own).
+def background(queue: str = "scan") -> ThreadPoolExecutor:
+    """This process's background thread for k-d tree builds of one ``queue`` (a forked child gets its own).
 
-    Builds release the GIL, so they run on a second core beside numpy work on the first.
+    Builds release the GIL, so they run on a second core beside numpy work on the first. The
+    map's builds have a queue of their own ("map"): the scans prepared ahead on other threads
+    (``odometry.pipeline.register_frames``) must not hold up the tree the next registration waits for.
     """
-    pid = os.getpid()
-    if pid not in _background:
-        _background[pid] = ThreadPoolExecutor(max_workers=1, thread_name_prefix="kdtree")
-    return _background[pid]
+    key = (os.getpid(), queue)
+    with _background_lock:  # (scans prepared on two threads may ask for it at once)
+        if key not in _background:
+            _background[key] = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"kdtree-{queue}")
+        return _background[key]
 
 
 def curvature_keep(curvature: np.ndarray, max_curvature: float) -> np.ndarray:

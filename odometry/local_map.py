@@ -176,7 +176,7 @@ class LocalMap:
         self._voxel_counts = np.zeros(0, dtype=np.int64)
         # Optional (N,) values carried with the points (``update``'s payload), None when not used.
         self._payload: np.ndarray | None = None
-        self._tree = background().submit(KDTree, self.points)
+        self._tree = background("map").submit(KDTree, self.points)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -219,7 +219,7 @@ class LocalMap:
         added = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload, nearest_m)
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
         # (built on the background thread while the next scan is cleaned and filtered)
-        self._tree = background().submit(KDTree, self.points)
+        self._tree = background("map").submit(KDTree, self.points)
         return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
 
     def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None,

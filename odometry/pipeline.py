@@ -10,7 +10,8 @@
     align      ICP: match in the previous scan or the local map, reject, point-to-plane, until converged
     update     pose_i = pose_{i-1} T_{i-1,i}; remember the motion; this scan becomes the target / joins the map
 
-Clean and filter read no state (``Odometry.prepare``); the rest does (``Odometry.register_prepared``).
+Clean and filter read no state (``Odometry.prepare``; with per-point times and a raw target the filter
+follows the de-skew, in the registration); the rest does (``Odometry.register_prepared``).
 ``register_frames`` (and ``run_sequence`` over it) prepares the next scans on threads of their own
 while the current one registers: the same poses, both cores at work.
 """
@@ -21,6 +22,7 @@ import csv
 import logging
 import math
 import os
+import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -260,7 +262,8 @@ class PreparedScan:
     clean: its clean points. scan: its ICP points as measured (None until the filter has run:
     with per-point times and a raw target, ``register_prepared`` de-skews first). deskewing: per-point
     times are known and the de-skew is on. diag, seconds: the frame's diagnostics and stage times so
-    far. seconds_spent: the time its preparation took, s (counted in the frame's total).
+    far. seconds_spent: the time its preparation took, s (counted in the frame's total). registered:
+    ``register_prepared`` has taken it (a scan is registered once: its points are de-skewed in place).
     """
 
     clean: CleanScan
@@ -269,6 +272,7 @@ class PreparedScan:
     diag: FrameDiagnostics
     seconds: dict
     seconds_spent: float
+    registered: bool = False
 
 
 @dataclass
@@ -427,6 +431,10 @@ class Odometry:
                           true_motion: np.ndarray | None = None) -> np.ndarray:
         """``register`` of a scan ``prepare`` cleaned and filtered (once: its scan is de-skewed in place)."""
         cfg, st = self.config, self.state
+        if prepared.registered:
+            raise OdometryError("this prepared scan was registered already (its points are de-skewed in place): "
+                                "prepare it again")
+        prepared.registered = True
         t_start = time.perf_counter()
         diag = prepared.diag
         diag.frame = len(st.poses)
@@ -766,10 +774,13 @@ PREFETCH_ENV = "SALO_PREFETCH_SCANS"
 
 def default_prefetch(config: OdometryConfig | None = None) -> int:
     """Scans prepared ahead when the caller does not say: ``$SALO_PREFETCH_SCANS``, else ``PREFETCH_SCANS``
-    (``PREFETCH_SCANS_WITHOUT_NORMALS`` for a ``config`` whose scans get no normals of their own)."""
+    (``PREFETCH_SCANS_WITHOUT_NORMALS`` for a ``config`` whose preparation holds no normals of the scan)."""
     text = os.environ.get(PREFETCH_ENV)
     if text is None or not text.strip():
-        if config is not None and not scan_normals_needed(config):
+        # (a raw target with the de-skew on filters after the de-skew, in the registration: only the
+        # cleaning goes ahead there)
+        filtered_ahead = not (config is not None and config.match.target == "raw" and config.deskew.enabled)
+        if config is not None and not (scan_normals_needed(config) and filtered_ahead):
             return PREFETCH_SCANS_WITHOUT_NORMALS
         return PREFETCH_SCANS
     try:
@@ -782,6 +793,7 @@ def default_prefetch(config: OdometryConfig | None = None) -> int:
 
 
 _prefetchers: dict[tuple[int, int], ThreadPoolExecutor] = {}
+_prefetchers_lock = threading.Lock()
 
 
 def _prefetcher(threads: int) -> ThreadPoolExecutor:
@@ -790,9 +802,10 @@ def _prefetcher(threads: int) -> ThreadPoolExecutor:
     Not ``filters.background()``: a preparation waits on the k-d tree builds queued there.
     """
     key = (os.getpid(), threads)
-    if key not in _prefetchers:
-        _prefetchers[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="prepare")
-    return _prefetchers[key]
+    with _prefetchers_lock:
+        if key not in _prefetchers:
+            _prefetchers[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="prepare")
+        return _prefetchers[key]
 
 
 def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int | None = None
@@ -806,8 +819,10 @@ def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: in
     by this thread only; an error it raises (a file that cannot be read) comes after the poses
     of the scans before it.
     """
-    it = iter(scans)
     prefetch = default_prefetch(odometry.config) if prefetch is None else prefetch
+    if prefetch < 0:
+        raise ValueError(f"prefetch must be >= 0 scans, got {prefetch}")
+    it = iter(scans)
     pool = _prefetcher(prefetch) if prefetch > 0 else None
     pending: deque = deque()  # (scan, its preparation: a future, or None to prepare here, first?), in order
     first = not odometry.state.poses
@@ -830,13 +845,21 @@ def register_frames(odometry: Odometry, scans: Iterable[ScanInput], prefetch: in
             pending.append((scan, job, first))
             first = False
 
-    top_up()
-    while pending:
-        scan, job, is_first = pending.popleft()
-        prepared = (job.result() if job is not None
-                    else odometry.prepare(scan.points, scan.times_s, scan.rings, first=is_first))
-        top_up()  # (the next preparations start before this registration)
-        yield odometry.register_prepared(prepared, stamp_s=scan.stamp_s, true_motion=scan.true_motion)
+    try:
+        top_up()
+        while pending:
+            scan, job, is_first = pending.popleft()
+            prepared = (job.result() if job is not None
+                        else odometry.prepare(scan.points, scan.times_s, scan.rings, first=is_first))
+            if pool is not None:
+                top_up()  # (the next preparations start before this registration)
+            yield odometry.register_prepared(prepared, stamp_s=scan.stamp_s, true_motion=scan.true_motion)
+            if pool is None:
+                top_up()  # (one thing at a time: the next scan is read after this one is registered)
+    finally:  # (an error, or a caller that stops early: the preparations not started are dropped)
+        for _, job, _ in pending:
+            if job is not None:
+                job.cancel()
     if error is not None:
         raise error
 

@@ -75,7 +75,8 @@ def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = N
     odo = Odometry(config_from_dict(changes or {}, base=variant(name)), seq.sensor)
     n = len(seq) if frames is None else frames
     data = [seq[k] for k in range(n)]
-    scans = [ScanInput(f.points, deskew_times(seq, f), f.ring, float(seq.times[k])) for k, f in enumerate(data)]
+    # (the per-point times are worked out inside the clock, as KISS-ICP's run does for its timestamps)
+    scans = (ScanInput(f.points, deskew_times(seq, f), f.ring, float(seq.times[k])) for k, f in enumerate(data))
     t = time.perf_counter()
     for _ in register_frames(odo, scans, prefetch):
         pass
@@ -84,10 +85,10 @@ def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = N
     return np.stack(odo.poses), seconds, stages
 
 
-def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None) -> float:
+def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None, prefetch: int | None = None) -> float:
     """Peak traced allocation (numpy included) while registering ``frames`` frames (slows the run: apart)."""
     tracemalloc.start()
-    run_ours(seq, name, frames, changes)
+    run_ours(seq, name, frames, changes, prefetch)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return peak / 1e6
@@ -108,6 +109,7 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
           + (f", {repeat} interleaved rounds" if repeat > 1 else ""))
     cfg = variant(DEFAULT_VARIANT)
     methods = []  # (label, run() -> (poses, seconds, stages or None))
+    ahead = {}  # label -> scans prepared ahead (ours)
     for name, spec in PEERS.items():
         if only and name not in only:
             continue
@@ -129,6 +131,7 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
             how = "" if p is None else ", 1 thread" if p == 0 else f", {p} ahead"
             label = (f"default ({v})" if name == "default" else name) + how
             methods.append((label, v, lambda v=v, p=p: run_ours(seq, v, changes=changes, prefetch=p)))
+            ahead[label] = p
         # (a warm-up on three frames, untimed: the compiled kernels are loaded, or compiled on a
         # fresh install, before the clock runs, as the peers' code is compiled ahead)
         run_ours(seq, v, frames=min(3, len(seq)), changes=changes)
@@ -155,7 +158,7 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
             print(line + f"{'':>8s}")
             continue
         per_stage = {s: float(np.median([r[s] for r in stages[label]])) for s in STAGES}
-        mem = peak_memory_mb(seq, v, memory_frames, changes) if memory_frames > 0 else float("nan")
+        mem = peak_memory_mb(seq, v, memory_frames, changes, ahead[label]) if memory_frames > 0 else float("nan")
         other = 1000 * spent / len(seq) - sum(per_stage.values())
         print(line + f"{mem:8.0f} " + " ".join(f"{per_stage[s]:8.1f}" for s in STAGES) + f" {other:8.1f}")
 
