@@ -255,6 +255,12 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
                                      period_s)
 
 
+def filters_as_measured(config: OdometryConfig) -> bool:
+    """Whether scans are filtered as measured, their ICP points de-skewed afterwards (``Odometry.prepare``),
+    rather than de-skewed first: all but a raw target with the de-skew on (it keeps every de-skewed point)."""
+    return config.match.target != "raw" or not config.deskew.enabled
+
+
 @dataclass
 class PreparedScan:
     """A scan cleaned and filtered as measured, before any state is used (``Odometry.prepare``).
@@ -406,9 +412,8 @@ class Odometry:
         # a normal's neighbours fire within microseconds of each other (except at the sweep's seam),
         # so they move rigidly, and the beams the NCF's noise follows start at the sensor's origin
         # only in the measured frame. Far fewer points to move. (A raw target keeps every de-skewed point.)
-        filter_first = deskewing and cfg.match.target != "raw"
         prepared = PreparedScan(clean, None, deskewing, diag, seconds, 0.0)
-        if not deskewing or filter_first:
+        if not deskewing or filters_as_measured(cfg):
             self._filter(prepared, first)
         prepared.seconds_spent = time.perf_counter() - t_start
         return prepared
@@ -777,12 +782,10 @@ def default_prefetch(config: OdometryConfig | None = None) -> int:
     (``PREFETCH_SCANS_WITHOUT_NORMALS`` for a ``config`` whose preparation holds no normals of the scan)."""
     text = os.environ.get(PREFETCH_ENV)
     if text is None or not text.strip():
-        # (a raw target with the de-skew on filters after the de-skew, in the registration: only the
-        # cleaning goes ahead there)
-        filtered_ahead = not (config is not None and config.match.target == "raw" and config.deskew.enabled)
-        if config is not None and not (scan_normals_needed(config) and filtered_ahead):
-            return PREFETCH_SCANS_WITHOUT_NORMALS
-        return PREFETCH_SCANS
+        # (a scan filtered after its de-skew is filtered in the registration: only its cleaning goes ahead)
+        if config is None or (scan_normals_needed(config) and filters_as_measured(config)):
+            return PREFETCH_SCANS
+        return PREFETCH_SCANS_WITHOUT_NORMALS
     try:
         value = int(text)
     except ValueError:

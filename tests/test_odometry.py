@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -277,6 +279,26 @@ def test_prefetching_the_next_scan_gives_the_poses_of_one_frame_after_another(ci
     if not changes:  # (the variants as shipped track the truth; the others are here for their code paths)
         rel = se3.inverse(gt[0]) @ gt[frames]
         assert np.linalg.norm(runs[0][:, :3, 3] - rel[:, :3, 3], axis=1).max() < 0.05
+
+
+def test_scans_are_prepared_on_other_threads_while_one_registers(city, monkeypatch):
+    """With scans prepared ahead, ``Odometry.prepare`` runs on the prefetch threads, not on the caller's."""
+    world, traj = city
+    sim = SweepSimulator(world, SENSOR, seed=1, motion_distortion=False)
+    scans = [ScanInput(s.xyz, None, s.ring) for s in (sim.sweep(traj, 5.0 + 0.1 * k, k) for k in range(3))]
+    threads = []
+    prepare = Odometry.prepare
+
+    def recording(self, *args, **kwargs):
+        threads.append(threading.current_thread().name)
+        return prepare(self, *args, **kwargs)
+
+    monkeypatch.setattr(Odometry, "prepare", recording)
+    for ahead, on_caller in ((2, False), (0, True)):
+        threads.clear()
+        assert len(list(register_frames(Odometry(variant(DEFAULT_VARIANT), SENSOR), scans, ahead))) == 3
+        assert len(threads) == 3
+        assert all((t == threading.current_thread().name) == on_caller for t in threads), (ahead, threads)
 
 
 def test_a_prepared_scan_is_registered_once(city):
