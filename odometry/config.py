@@ -40,7 +40,7 @@ NOISE_MODELS = ("range", "isotropic")
 MATCH_TARGETS = ("filtered", "raw", "map")
 NCF_SCOPES = ("scan", "map", "both")
 WEAK_UPDATES = ("prior", "remap")
-COLD_START_TARGETS = ("scan", "map")
+COLD_START_TARGETS = ("scan", "map", "better")
 GCR_FORMULAS = ("beam", "paper")
 
 
@@ -150,8 +150,9 @@ class MapParams(_Stage):
     max_distance_m: float | None = param(None, "map points farther than this from the sensor are dropped (null: "
                                          "clean.max_range_m)", above=0.0)
     cold_start_target: str = param("map", "the first registration's target: scan, the first scan's points with "
-                                   "their own normals (as scan-to-scan); map, the map of that one scan",
-                                   choices=COLD_START_TARGETS)
+                                   "their own normals (as scan-to-scan); map, the map of that one scan; better: "
+                                   "both, keeping the registration whose weakest direction of translation is "
+                                   "better constrained", choices=COLD_START_TARGETS)
 
 
 @dataclass(frozen=True)

@@ -304,6 +304,22 @@ class OdometryState:
     local_map: LocalMap | None = None
 
 
+def better_constrained(starts: list[tuple[str, Target, RegistrationResult]]
+                       ) -> tuple[str, Target, RegistrationResult]:
+    """Of first registrations ``(kind, target, result)``, the one whose weakest direction of
+    translation is best constrained: the largest smallest eigenvalue of its information per
+    match (``RegistrationResult.translation_eigenvalues``); a singular result only when all are;
+    on a tie the earlier. A registration that slid along a weakly constrained direction (a map
+    of one scan on open ground, whose single-ring ground has no normals) has the smaller one.
+    """
+    def weakest(start) -> float:
+        result = start[2]
+        w = float(result.translation_eigenvalues[0])
+        return -math.inf if result.singular or not math.isfinite(w) else w
+
+    return max(starts, key=weakest)  # (max keeps the first of equal keys)
+
+
 class Odometry:
     """ICP odometry (Alg. 1) with the paper's filters and rejectors, scan-to-scan or scan-to-map.
 
@@ -347,10 +363,13 @@ class Odometry:
         # The de-skew refinements' ICP (deskew.refinement_iterations: a cap on its iterations)
         capped = config.deskew.refinement_iterations
         self._refine_config = config if capped is None else config.replace(icp={"max_iterations": capped})
-        # With map.cold_start_target: scan, a map variant's first registration is against the first
-        # scan's own points and normals: a map of one scan has a normal only where two scan lines
-        # meet, which on open ground leaves the direction of travel to a few objects (README).
-        self._scan_cold_start = config.match.target == "map" and config.map.cold_start_target == "scan"
+        # A map variant's first registration is against the map of the first scan, its own points and
+        # normals (map.cold_start_target: scan), or both, keeping the better constrained (better): a
+        # map of one scan has a normal only where two scan lines meet, which on open ground leaves
+        # the direction of travel to a few objects (README).
+        self._cold_start_kinds = (("map", "scan") if config.map.cold_start_target == "better"
+                                  else (config.map.cold_start_target,)) if config.match.target == "map" else ("map",)
+        self._scan_cold_start = "scan" in self._cold_start_kinds
 
     @property
     def poses(self) -> list[np.ndarray]:
@@ -509,31 +528,25 @@ class Odometry:
             T_target_prev = np.eye(4)
         else:
             T_target_prev = se3.inverse(st.poses[st.target_frame]) @ T_world_prev
-        target = self._cold_start_target() if first else self._target()
         source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
         T_init = T_target_prev @ T_guess
-        prior = not first  # the first registration starts from a guess, not from a known motion
         runs: list[RegistrationResult] = []  # (every registration run: their time and iterations count)
-        result = None
         if first:
-            # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
-            # the correspondence bound, and the points that see it (few, in a corridor) would be
-            # trimmed first. A coarse registration with a wide bound and no trimming comes first.
-            coarse = register(source, target, T_init, self._coarse_config, self._chain_coarse, T_target_prev,
-                              motion_prior=False)
-            runs.append(coarse)
-            if not coarse.singular:
-                result = register(source, target, coarse.T_target_source, cfg, chain, T_target_prev, prior)
-                runs.append(result)
-        # From the guess: every later frame; the first when its coarse pass failed, or, with
-        # match.cold_start_from_rest, as a second start (odometry/cold_start.py). Not with per-point
-        # times: both scans are de-skewed as if standing still until the refinements below re-de-skew
-        # them with the estimate, and such scans favour standing still.
-        if result is None or (first and cfg.match.cold_start_from_rest and not deskewing):
-            from_guess = register(source, target, T_init, cfg, chain, T_target_prev, prior)
-            runs.append(from_guess)
-            result = from_guess if result is None else choose_start(
-                source.points, target, from_guess, result, cfg.match.max_correspondence_distance_m)
+            # Against each cold-start target; the better constrained one is kept (``better_constrained``)
+            starts = []
+            for kind in self._cold_start_kinds:
+                target = self._cold_start_target(kind)
+                starts.append((kind, target, self._first_registration(source, target, T_init, chain, T_target_prev,
+                                                                      deskewing, runs)))
+            first_kind, target, result = better_constrained(starts)
+            if len(starts) > 1:
+                log.info("first registration against the %s (weakest translational information per match: %s)",
+                         "first scan" if first_kind == "scan" else "map of the first scan",
+                         ", ".join(f"{k} {r.translation_eigenvalues[0]:.3g}" for k, _, r in starts))
+        else:
+            target = self._target()
+            result = register(source, target, T_init, cfg, chain, T_target_prev)
+            runs.append(result)
         icp_seconds = {stage: sum(r.seconds.get(stage, 0.0) for r in runs) for stage in runs[-1].seconds}
         icp_iterations = sum(r.iterations for r in runs)
         T_deskew = T_guess
@@ -559,7 +572,7 @@ class Odometry:
                 if st.local_map is not None:
                     st.local_map = new_local_map(cfg, self.sensor)
                     st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
-                target = self._cold_start_target()
+                target = self._cold_start_target(first_kind)
             else:
                 M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
             redeskew_scan(scan, T_deskew, M, period)
@@ -568,7 +581,7 @@ class Odometry:
             # few centimetres does not change: they are reused.
             source = Source(scan.points, scan.normals, source.gcr_threshold_m)
             refined = register(source, target, result.T_target_source, self._refine_config, chain, T_target_prev,
-                               prior)
+                               not first)
             # (a capped refinement is a fixed number of steps from a converged estimate: it inherits that)
             refined.converged |= self._refine_config is not cfg and result.converged
             for stage, spent in refined.seconds.items():  # stage times and iterations cover every registration
@@ -645,13 +658,41 @@ class Odometry:
         st = self.state
         return st.local_map.target() if st.local_map is not None else scan_target(st.target_scan, self.config)
 
-    def _cold_start_target(self) -> Target:
-        """The first registration's target: the first scan's own points and normals (in the world
-        frame, which is its frame) when ``map.cold_start_target`` is scan, else the usual target."""
+    def _cold_start_target(self, kind: str) -> Target:
+        """A first registration's target: the first scan's own points and normals (in the world
+        frame, which is its frame) for ``kind`` scan, else the usual target (the map of that scan)."""
         scan = self.state.target_scan
-        if self._scan_cold_start and scan is not None and len(scan.points):
+        if kind == "scan" and scan is not None and len(scan.points):
             return filtered_scan_target(scan)
         return self._target()
+
+    def _first_registration(self, source: Source, target: Target, T_init: np.ndarray, chain,
+                            T_target_prev: np.ndarray, deskewing: bool,
+                            runs: list[RegistrationResult]) -> RegistrationResult:
+        """A sequence's first registration of ``source`` on ``target``: the coarse pass, then the ICP
+        (each run appended to ``runs``)."""
+        cfg = self.config
+        result = None
+        # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
+        # the correspondence bound, and the points that see it (few, in a corridor) would be
+        # trimmed first. A coarse registration with a wide bound and no trimming comes first.
+        # (motion_prior=False: T_init is a guess, not a known motion, so no direction is held to it)
+        coarse = register(source, target, T_init, self._coarse_config, self._chain_coarse, T_target_prev,
+                          motion_prior=False)
+        runs.append(coarse)
+        if not coarse.singular:
+            result = register(source, target, coarse.T_target_source, cfg, chain, T_target_prev, motion_prior=False)
+            runs.append(result)
+        # From the guess when the coarse pass failed, or, with match.cold_start_from_rest, as a
+        # second start (odometry/cold_start.py). Not with per-point times: both scans are de-skewed
+        # as if standing still until the refinements re-de-skew them with the estimate, and such
+        # scans favour standing still.
+        if result is None or (cfg.match.cold_start_from_rest and not deskewing):
+            from_guess = register(source, target, T_init, cfg, chain, T_target_prev, motion_prior=False)
+            runs.append(from_guess)
+            result = from_guess if result is None else choose_start(
+                source.points, target, from_guess, result, cfg.match.max_correspondence_distance_m)
+        return result
 
     def _frame_period(self, stamp_s: float | None) -> float:
         st = self.state
