@@ -149,7 +149,7 @@ class MapParams(_Stage):
                                        "every point while its voxel has room)", min=0.0)
     max_distance_m: float | None = param(None, "map points farther than this from the sensor are dropped (null: "
                                          "clean.max_range_m)", above=0.0)
-    cold_start_target: str = param("map", "the first registration's target: scan, the first scan's points with "
+    cold_start_target: str = param("better", "the first registration's target: scan, the first scan's points with "
                                    "their own normals (as scan-to-scan); map, the map of that one scan; better: "
                                    "both, keeping the registration whose weakest direction of translation is "
                                    "better constrained", choices=COLD_START_TARGETS)
