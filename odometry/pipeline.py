@@ -367,8 +367,11 @@ class Odometry:
         # normals (map.cold_start_target: scan), or both, keeping the better constrained (better): a
         # map of one scan has a normal only where two scan lines meet, which on open ground leaves
         # the direction of travel to a few objects (README).
-        self._cold_start_kinds = (("map", "scan") if config.map.cold_start_target == "better"
-                                  else (config.map.cold_start_target,)) if config.match.target == "map" else ("map",)
+        # (scan-to-scan: its usual target, the first scan; "map" stands for that below)
+        self._cold_start_kinds: tuple[str, ...] = ("map",)
+        if config.match.target == "map":
+            better = config.map.cold_start_target == "better"
+            self._cold_start_kinds = ("map", "scan") if better else (config.map.cold_start_target,)
         self._scan_cold_start = "scan" in self._cold_start_kinds
 
     @property
