@@ -15,7 +15,8 @@ Variants (the rows of the paper's Table I):
 
 Each has a scan-to-map twin (``bl-map``, ``ncf-map``, ``salo-map``): the same
 filters and rejectors, registered against a local map of recent scans
-(``match: {target: map}``, ``odometry.local_map``) instead of the previous scan.
+(``match: {target: map}``, ``odometry.local_map``) instead of the previous scan,
+with poles (``poles: {enabled: true}``, ``odometry.poles``) beside the planes.
 
 The keys are grouped by stage, as nested sections (``paramspec``): in YAML a
 mapping per stage, on the command line a dotted key (``--set
@@ -156,6 +157,18 @@ class MapParams(_Stage):
 
 
 @dataclass(frozen=True)
+class PolesParams(_Stage):
+    """Poles (odometry/poles.py): narrow objects clear of their background, matched across the road."""
+
+    section_name = "poles"
+    enabled: bool = param(False, "add each pole of the scan (a run of a ring's returns at most max_width_m across, "
+                          "clearly nearer than both sides) matched to a recent pole as two horizontal "
+                          "constraints, and start the first registration from the poles' offset")
+    max_width_m: float = param(0.6, "widest run across the beam that counts as a pole", above=0.0)
+    frames_kept: int = param(30, "poles of this many recent frames are matched against", min=1)
+
+
+@dataclass(frozen=True)
 class GcrParams(_Stage):
     """The geometric correspondence rejector (GCR, odometry/gcr.py)."""
 
@@ -225,6 +238,7 @@ class OdometryConfig(Params):
     ncf: NcfParams = section(NcfParams)
     match: MatchParams = section(MatchParams)
     map: MapParams = section(MapParams)
+    poles: PolesParams = section(PolesParams)
     gcr: GcrParams = section(GcrParams)
     icp: IcpParams = section(IcpParams)
     degeneracy: DegeneracyParams = section(DegeneracyParams)
@@ -260,9 +274,9 @@ class OdometryConfig(Params):
 BL = OdometryConfig(name="bl", ncf={"enabled": False}, gcr={"enabled": False})
 NCF = OdometryConfig(name="ncf", ncf={"enabled": True}, gcr={"enabled": False})
 SALO = OdometryConfig(name="salo", ncf={"enabled": True}, gcr={"enabled": True})
-BL_MAP = BL.replace(name="bl-map", match={"target": "map"})
-NCF_MAP = NCF.replace(name="ncf-map", match={"target": "map"}, ncf={"applies_to": "map"})
-SALO_MAP = SALO.replace(name="salo-map", match={"target": "map"}, ncf={"applies_to": "map"})
+BL_MAP = BL.replace(name="bl-map", match={"target": "map"}, poles={"enabled": True})
+NCF_MAP = NCF.replace(name="ncf-map", match={"target": "map"}, ncf={"applies_to": "map"}, poles={"enabled": True})
+SALO_MAP = SALO.replace(name="salo-map", match={"target": "map"}, ncf={"applies_to": "map"}, poles={"enabled": True})
 VARIANTS = {c.name: c for c in (BL, NCF, SALO, BL_MAP, NCF_MAP, SALO_MAP)}
 # What ``salo odometry`` runs without --variant (chosen on the generalisation suite's tuning
 # seeds; README "The method, and our choices").

@@ -26,6 +26,7 @@ from .constraints import restore_constraints
 from .kdtree import KDTree
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import knn, neighbourhood_pca
+from .poles import Poles
 from .scan_lines import widen_one_ring_neighbourhoods
 from .voxels import first_per_voxel, voxel_centroids
 
@@ -72,6 +73,7 @@ class FilteredScan:
     seconds: time spent per stage.
     points_tree: (the points it was started on, a future of the k-d tree over them), started on the
         background thread when the scan becomes the next scan-to-scan target; None before.
+    poles: the scan's poles (``odometry.poles``), de-skewed as ``points`` are, or None (not extracted).
     """
 
     points: np.ndarray
@@ -86,6 +88,7 @@ class FilteredScan:
     counts: dict = field(default_factory=dict)
     seconds: dict = field(default_factory=dict)
     points_tree: tuple[np.ndarray, Future] | None = None
+    poles: Poles | None = None
 
     def __len__(self) -> int:
         return len(self.points)

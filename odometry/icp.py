@@ -21,6 +21,7 @@ from .constraints import restore_constraints, weakest_translation
 from .estimation import point_to_plane_step
 from .kdtree import KDTree
 from .kernels import reusable_matches
+from .poles import PoleTarget, pole_rows
 from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
 
 
@@ -33,12 +34,14 @@ class Source:
     gcr_thresholds: ``(points (m, 3), normals (m, 3), rows (m,)) -> (m,)`` thresholds of
         source rows from given normals, for a source without normals: ``register`` fills
         ``gcr_threshold_m`` from the target's normals at the first matches.
+    poles: (P, 3) the scan's poles (``odometry.poles``), m, or None.
     """
 
     points: np.ndarray
     normals: np.ndarray
     gcr_threshold_m: np.ndarray | None = None
     gcr_thresholds: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+    poles: np.ndarray | None = None
 
 
 @dataclass
@@ -74,6 +77,7 @@ class Target:
     unless they are the last evidence of a direction (``odometry.constraints``).
     ``known`` (N,) marks the rows estimated (both may be shared with a map's cache).
     ``nearest``: the last nearest-neighbour search against it (``match``); its points must not change.
+    ``poles``: poles to match the source's against (``odometry.poles``), or None.
     """
 
     points: np.ndarray
@@ -83,6 +87,7 @@ class Target:
     known: np.ndarray | None = None
     uncertain: np.ndarray | None = None
     nearest: NearestCache | None = None
+    poles: PoleTarget | None = None
 
     def normals_at(self, index: np.ndarray) -> np.ndarray:
         if self.estimate_normals is not None:
@@ -104,8 +109,9 @@ class RegistrationResult:
 
     T_target_source: (4, 4). converged: a termination threshold was met before the
     iteration cap. iterations: steps taken. matches: number of correspondences
-    after each stage of the last iteration ("candidates", then each rejector by name);
-    n_matches: those used by the last step.
+    after each stage of the last iteration ("candidates", then each rejector by name, and
+    "poles": pole matches); n_matches: the rows of the last step (a plane match one, a pole
+    match two).
     rms_m: point-to-plane RMS residual at the last step. H: (6, 6) information of
     the last step's matches. info_eigenvalues: (6,) ascending eigenvalues of H / N;
     translation_eigenvalues: (3,) of its translation block. degenerate: the
@@ -248,6 +254,9 @@ def register(
     matches constrain too weakly keep ``T_init``'s value (``odometry.constraints``).
     ``motion_prior=False``: ``T_init`` is no prediction (the first registration of a sequence
     starts from a guess, not from a known motion), so no direction is held to it.
+    Poles of the source and target (``odometry.poles``) add two horizontal rows per match
+    within the same bound (untrimmed: they are few, and the farthest are the evidence of a
+    motion the planes do not see).
     """
     rejectors = rejectors_for(config) if rejectors is None else rejectors
     T = np.array(T_init, dtype=float)
@@ -288,13 +297,19 @@ def register(
             E = T @ se3.inverse(T_init)
             E[:3, 3] += E[:3, :3] @ centre - centre
             deviation = se3.log(E)
-        step = point_to_plane_step(moved.take(m.source_index, axis=0) - centre,
-                                   target.points.take(m.target_index, axis=0) - centre,
-                                   m.target_normals, min_eigenvalue=min_eigenvalue,
+        rows = (moved.take(m.source_index, axis=0), target.points.take(m.target_index, axis=0), m.target_normals)
+        if source.poles is not None and len(source.poles) and target.poles is not None:
+            # the poles' horizontal constraints beside the planes' (``odometry.poles``)
+            poles = pole_rows(source.poles @ T[:3, :3].T + T[:3, 3], target.poles, bound)
+            counts["poles"] = len(poles[0]) // 2
+            rows = tuple(np.vstack([a, b]) for a, b in zip(rows, poles, strict=True))
+        n_rows = len(rows[0])
+        step = point_to_plane_step(rows[0] - centre, rows[1] - centre, rows[2], min_eigenvalue=min_eigenvalue,
                                    rotation_scale_m=config.degeneracy.rotation_scale_m,
                                    mode=config.degeneracy.weak_direction_update, deviation=deviation)
         seconds["estimate"] += time.perf_counter() - t2
         res.iterations, res.rms_m, res.H, res.remapped = it, step.rms_m, step.H, step.remapped
+        res.n_matches = n_rows
         if step.rank < 6:
             res.singular = True
             break

@@ -48,12 +48,13 @@ from .icp import RegistrationResult, Source, Target, match, register, rejectors_
 from .kdtree import KDTree
 from .local_map import LocalMap
 from .normals import estimate_normals
+from .poles import PoleMap, extract_poles, pole_translation
 
 log = logging.getLogger(__name__)
 
 
 # The stages timed in the diagnostics, in the order a frame passes them.
-STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "match", "reject", "estimate", "map")
+STAGES = ("deskew", "voxel", "normals", "ncf_curvature", "poles", "match", "reject", "estimate", "map")
 
 
 class OdometryError(ValueError):
@@ -100,7 +101,8 @@ class FrameDiagnostics:
 
 CSV_COLUMNS = (
     ["frame", "points_raw", "points_nonfinite", "points_in_range", "voxels", "after_ncf", "after_curvature",
-     "candidates", "after_distance", "after_gcr", "after_trimmed", "iterations", "converged", "rms_m"]
+     "candidates", "after_distance", "after_gcr", "after_trimmed", "pole_matches", "iterations", "converged",
+     "rms_m"]
     + [f"eig{k}" for k in range(6)] + ["t_eig0", "t_eig1", "t_eig2", "weak_x", "weak_y", "weak_z", "remapped",
                                         "restored"]
     + ["degenerate", "singular", "too_few_points", "implausible", "extrapolated", "deskewed"]
@@ -113,7 +115,7 @@ def diagnostics_row(d: FrameDiagnostics) -> list:
     return (
         [d.frame, d.points_raw, d.points_nonfinite, d.points_in_range, fc.get("voxels", ""), fc.get("ncf", ""),
          fc.get("curvature", ""), m.get("candidates", ""), m.get("distance", ""), m.get("gcr", ""),
-         m.get("trimmed", ""), d.iterations, int(d.converged), f"{d.rms_m:.6g}"]
+         m.get("trimmed", ""), m.get("poles", ""), d.iterations, int(d.converged), f"{d.rms_m:.6g}"]
         + [f"{v:.6g}" for v in d.info_eigenvalues] + [f"{v:.6g}" for v in d.translation_eigenvalues]
         + [f"{v:.4f}" for v in d.weakest_direction] + [d.remapped, fc.get("restored", "")]
         + [int(d.degenerate), int(d.singular), int(d.too_few_points), int(d.implausible), int(d.extrapolated),
@@ -164,7 +166,7 @@ def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray
 
 
 def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel | None, with_gcr: bool) -> Source:
-    """The registration's source: the filtered points and normals, with GCR thresholds when used.
+    """The registration's source: the filtered points and normals (and poles), with GCR thresholds when used.
 
     The GCR's neighbour beam distances need the surface's normal at each point. Scans
     registered against a map have no normals of their own (``filters.scan_normals_needed``):
@@ -179,8 +181,9 @@ def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel |
     ``map.voxel_size_m / sqrt(map.points_per_voxel)``, or ``map.min_point_spacing_m`` when wider
     (``map_point_spacing_m``).
     """
+    poles = None if scan.poles is None else scan.poles.points
     if not with_gcr:
-        return Source(scan.points, scan.normals)
+        return Source(scan.points, scan.normals, poles=poles)
     rings = scan.rings if scan.rings is not None else ring_of_points(scan.points, sensor)
     floor = config.gcr.noise_floor_m
     if config.match.target == "map":
@@ -192,8 +195,9 @@ def make_source(scan: FilteredScan, config: OdometryConfig, sensor: LidarModel |
         return thr
 
     if np.isnan(scan.normals[:1]).any():
-        return Source(scan.points, scan.normals, None, thresholds)
-    return Source(scan.points, scan.normals, thresholds(scan.points, scan.normals, np.arange(len(scan.points))))
+        return Source(scan.points, scan.normals, None, thresholds, poles)
+    return Source(scan.points, scan.normals, thresholds(scan.points, scan.normals, np.arange(len(scan.points))),
+                  poles=poles)
 
 
 def map_point_spacing_m(config: OdometryConfig) -> float:
@@ -240,7 +244,7 @@ def map_points(scan: FilteredScan, T_world_lidar: np.ndarray) -> np.ndarray:
 
 def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.ndarray, period_s: float,
                   centroids_motion: np.ndarray | None = None) -> None:
-    """Re-do the de-skew of a filtered scan's points and normals with a better motion (in place).
+    """Re-do the de-skew of a filtered scan's points, normals and poles with a better motion (in place).
 
     The centroids (what a map takes) move with the points when they are the points. Otherwise
     they move only when ``centroids_motion`` (4, 4), the motion they are de-skewed with now, is
@@ -248,6 +252,9 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
     """
     same = scan.points is scan.centroids  # (the ICP points are the centroids: move them once)
     scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, old_motion, new_motion, period_s)
+    poles = scan.poles
+    if poles is not None and poles.times_s is not None and len(poles):
+        poles.points, _ = redeskew(poles.points, None, poles.times_s, old_motion, new_motion, period_s)
     if same:
         scan.centroids = scan.points
     elif centroids_motion is not None and scan.centroid_times_s is not None and len(scan.centroids):
@@ -292,6 +299,7 @@ class OdometryState:
         scan until the first registration, for the cold start).
     target_frame: its frame index. target_motion: the motion its points are de-skewed with.
     local_map: the map of recent scans (``match.target: map``), else None.
+    pole_map: the poles of recent frames (``poles.enabled``, with a sensor), else None.
     """
 
     poses: list[np.ndarray] = field(default_factory=list)
@@ -302,6 +310,7 @@ class OdometryState:
     target_frame: int = 0
     target_motion: np.ndarray = field(default_factory=lambda: np.eye(4))
     local_map: LocalMap | None = None
+    pole_map: PoleMap | None = None
 
 
 def better_constrained(starts: list[tuple[str, Target, RegistrationResult]]
@@ -351,7 +360,10 @@ class Odometry:
             )
         self.config = config
         self.sensor = sensor
-        self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None)
+        # (poles need the sensor's range image: its rings and azimuth columns)
+        self.state = OdometryState(
+            local_map=new_local_map(config, sensor) if config.match.target == "map" else None,
+            pole_map=PoleMap(config.poles.frames_kept) if config.poles.enabled and sensor is not None else None)
         self.diagnostics: list[FrameDiagnostics] = []
         # The rejection chains, built once: with GCR, and without (the first registration)
         self._chain_with_gcr = rejectors_for(config)
@@ -450,6 +462,13 @@ class Odometry:
             clean.rings = ring_of_points(clean.points, self.sensor)
         scan = filter_scan(clean.points, cfg, clean.rings, self.sensor,
                            raw_times_s=clean.times_s if prepared.deskewing else None, with_normals=normals)
+        if self.state.pole_map is not None:
+            t = time.perf_counter()
+            rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, self.sensor)
+            scan.poles = extract_poles(clean.points, rings, self.sensor.rings, self.sensor.columns_per_sweep,
+                                       cfg.poles.max_width_m, clean.times_s if prepared.deskewing else None)
+            scan.counts["poles"] = len(scan.poles)
+            scan.seconds["poles"] = time.perf_counter() - t
         prepared.diag.filter_counts = scan.counts
         prepared.seconds.update(scan.seconds)
         prepared.scan = scan
@@ -575,14 +594,18 @@ class Odometry:
                 if st.local_map is not None:
                     st.local_map = new_local_map(cfg, self.sensor)
                     st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
+                if st.pole_map is not None and st.target_scan.poles is not None:
+                    st.pole_map = PoleMap(cfg.poles.frames_kept)
+                    st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points))
                 target = self._cold_start_target(first_kind)
             else:
                 M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
             redeskew_scan(scan, T_deskew, M, period)
             T_deskew = M
             # The GCR thresholds scale with range and incidence, which a re-de-skew by a
-            # few centimetres does not change: they are reused.
-            source = Source(scan.points, scan.normals, source.gcr_threshold_m)
+            # few centimetres does not change: they are reused. (The poles were re-de-skewed too.)
+            source = Source(scan.points, scan.normals, source.gcr_threshold_m,
+                            poles=None if scan.poles is None else scan.poles.points)
             refined = register(source, target, result.T_target_source, self._refine_config, chain, T_target_prev,
                                not first)
             # (a capped refinement is a fixed number of steps from a converged estimate: it inherits that)
@@ -640,6 +663,8 @@ class Odometry:
         if st.local_map is not None:
             points_world = map_points(scan, pose)
             st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(points_world, target))
+        if st.pole_map is not None and scan.poles is not None:
+            st.pole_map.add(se3.transform_points(pose, scan.poles.points))
         stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
         seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t
 
@@ -659,14 +684,23 @@ class Odometry:
 
     def _target(self) -> Target:
         st = self.state
-        return st.local_map.target() if st.local_map is not None else scan_target(st.target_scan, self.config)
+        target = st.local_map.target() if st.local_map is not None else scan_target(st.target_scan, self.config)
+        return self._with_poles(target)
+
+    def _with_poles(self, target: Target) -> Target:
+        """``target`` with the recent frames' poles in its frame (the world for a map, else the target scan's)."""
+        st = self.state
+        if st.pole_map is not None:
+            into = None if st.local_map is not None else se3.inverse(st.poses[st.target_frame])
+            target.poles = st.pole_map.target(into)
+        return target
 
     def _cold_start_target(self, kind: str) -> Target:
         """A first registration's target: the first scan's own points and normals (in the world
         frame, which is its frame) for ``kind`` scan, else the usual target (the map of that scan)."""
         scan = self.state.target_scan
         if kind == "scan" and scan is not None and len(scan.points):
-            return filtered_scan_target(scan)
+            return self._with_poles(filtered_scan_target(scan))
         return self._target()
 
     def _first_registration(self, source: Source, target: Target, T_init: np.ndarray, chain,
@@ -676,10 +710,24 @@ class Odometry:
         (each run appended to ``runs``)."""
         cfg = self.config
         result = None
+        # (motion_prior=False: T_init is a guess, not a known motion, so no direction is held to it)
+        # With poles on both sides, the horizontal offset most of them agree on is the guess, and the ICP
+        # starts there: where poles are the evidence along the road, the coarse pass below would let the
+        # rails' and the ground's sampling pattern (the same in both scans) pull it back to standing still.
+        if source.poles is not None and target.poles is not None:
+            moved = se3.transform_points(T_init, source.poles)
+            offset = pole_translation(moved, target.poles, cfg.match.initial_correspondence_distance_m)
+            if offset is not None:
+                T_start = T_init.copy()
+                T_start[:3, 3] += offset
+                result = register(source, target, T_start, cfg, chain, T_target_prev, motion_prior=False)
+                runs.append(result)
+                if not result.singular:
+                    return result
+                result = None
         # No motion to extrapolate yet: the sensor may already move by metres per frame, beyond
         # the correspondence bound, and the points that see it (few, in a corridor) would be
         # trimmed first. A coarse registration with a wide bound and no trimming comes first.
-        # (motion_prior=False: T_init is a guess, not a known motion, so no direction is held to it)
         coarse = register(source, target, T_init, self._coarse_config, self._chain_coarse, T_target_prev,
                           motion_prior=False)
         runs.append(coarse)
