@@ -164,7 +164,7 @@ class PolesParams(_Stage):
     enabled: bool = param(False, "add each pole of the scan (a run of a ring's returns at most max_width_m across, "
                           "clearly nearer than both sides) matched to a recent pole as two horizontal "
                           "constraints, and start the first registration from the poles' offset")
-    max_width_m: float = param(0.6, "widest run across the beam that counts as a pole", above=0.0)
+    max_width_m: float = param(1.2, "widest run across the beam that counts as a pole", above=0.0)
     frames_kept: int = param(30, "poles of this many recent frames are matched against", min=1)
 
 

@@ -5,9 +5,10 @@
 
     clean      drop non-finite points and points outside the range limits
     de-skew    undo motion distortion with the constant-velocity motion (times known)
-    filter     voxel grid -> kNN normals in the raw scan -> NCF -> curvature
+    filter     voxel grid -> kNN normals in the raw scan -> NCF -> curvature; poles (map variants)
     init       linear extrapolation: the last relative motion
-    align      ICP: match in the previous scan or the local map, reject, point-to-plane, until converged
+    align      ICP: match in the previous scan or the local map (and poles in recent poles), reject,
+               point-to-plane, until converged
     update     pose_i = pose_{i-1} T_{i-1,i}; remember the motion; this scan becomes the target / joins the map
 
 Clean and filter read no state (``Odometry.prepare``; with per-point times and a raw target the filter
@@ -344,7 +345,7 @@ class Odometry:
 
         clean        clean_scan: finite points within the range limits
         de-skew      deskew with the constant-velocity motion (per-point times known)
-        filter       filter_scan: voxel grid -> kNN normals -> NCF -> curvature
+        filter       filter_scan: voxel grid -> kNN normals -> NCF -> curvature; poles.extract_poles
         source       make_source: points, normals, GCR thresholds
         target       the previous scan (scan_target) or the local map (LocalMap.target)
         register     icp.register from the constant-velocity prediction
