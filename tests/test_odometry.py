@@ -201,7 +201,9 @@ def test_cold_start_on_open_ground_from_rest():
     (``match.cold_start_from_rest``, scans without per-point times; an option, README) keeps the first two
     frames within centimetres of the truth. Against the first scan's own points and normals
     (``map.cold_start_target: scan``, also an option) they stay there too, and so does the default, which
-    keeps the better constrained of the two registrations (``map.cold_start_target: better``): the scan's."""
+    keeps the better constrained of the two registrations (``map.cold_start_target: better``): the scan's.
+    Poles (on in the default) start the first registration from the offset they agree on, which keeps even
+    the map target there; the targets are compared without them."""
     import dataclasses
 
     from tools.experiments.generalize import simulate, suite
@@ -216,14 +218,19 @@ def test_cold_start_on_open_ground_from_rest():
         return max(np.linalg.norm(run.poses[k, :3, 3] - gt[k, :3, 3]) for k in (1, 2))
 
     default = variant(DEFAULT_VARIANT)
-    map_target = default.replace(map={"cold_start_target": "map"})
+    # the cold-start targets alone: without poles, whose agreed offset starts the first registration
+    no_poles = default.replace(poles={"enabled": False})
+    map_target = no_poles.replace(map={"cold_start_target": "map"})
     errors = {"map target": largest_error(map_target),
               "from rest": largest_error(map_target.replace(match={"cold_start_from_rest": True})),
-              "scan target": largest_error(default.replace(map={"cold_start_target": "scan"})),
-              "default": largest_error(default)}
-    # (measured: 6.1 and 3.7 cm; the map target's coarse estimate 1.65 m)
-    assert errors["from rest"] < 0.1 and errors["scan target"] < 0.1 and errors["default"] < 0.1, errors
+              "scan target": largest_error(no_poles.replace(map={"cold_start_target": "scan"})),
+              "better, no poles": largest_error(no_poles),
+              "default": largest_error(default),
+              "map target, poles": largest_error(default.replace(map={"cold_start_target": "map"}))}
+    # (measured: 6.1 and 3.7 cm; the map target's coarse estimate 1.65 m; with the poles' offset 3.3 cm)
+    assert max(errors[k] for k in ("from rest", "scan target", "better, no poles", "default")) < 0.1, errors
     assert errors["map target"] > 0.5, errors
+    assert errors["map target, poles"] < 0.1, errors
 
 
 def test_the_better_constrained_first_registration_is_kept():
@@ -240,7 +247,9 @@ def test_the_better_constrained_first_registration_is_kept():
     for family, seed, sensor in (("open", 107, "salo32"), ("highway", 102, "narrow32")):
         spec = next(s for s in suite((seed,), frames=3, families=(family,)) if s.kind == "real")
         seq = simulate(dataclasses.replace(spec, sensor=sensor))
-        runs = {kind: run_sequence(seq, variant(DEFAULT_VARIANT).replace(map={"cold_start_target": kind}))
+        # without poles, whose agreed offset would start both registrations near the truth
+        no_poles = variant(DEFAULT_VARIANT).replace(poles={"enabled": False})
+        runs = {kind: run_sequence(seq, no_poles.replace(map={"cold_start_target": kind}))
                 for kind in ("scan", "map", "better")}
         weakest = {kind: runs[kind].diagnostics[1].translation_eigenvalues[0] for kind in ("scan", "map")}
         kept = max(weakest, key=weakest.get)
