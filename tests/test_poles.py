@@ -102,7 +102,9 @@ def test_foreground_runs_of_a_ring():
 def test_pole_translation_takes_the_offset_most_poles_agree_on():
     """Four posts 4 m apart on each side, seen again from 1.5 m or 2.5 m farther on; the target sees one
     post more at each end. An offset of 1.5 m is found; 2.5 m fits the posts exactly as well as -1.5 m
-    (one spacing less) and the smaller is taken, unless other objects (signs) say otherwise."""
+    (one spacing less) and the smaller is taken, unless other objects (signs) say otherwise. With one
+    post of the true offset's missing from the target (occluded), the alias one spacing off has one vote
+    more (8 against 7): still the smaller, true, offset is taken."""
     def posts(xs):
         return np.array([(x, s * POST_Y_M, 0.3) for x in xs for s in (-1, 1)])
 
@@ -113,6 +115,9 @@ def test_pole_translation_takes_the_offset_most_poles_agree_on():
         source = np.vstack([posts(seen), signs]) if with_signs else posts(seen)
         got = pole_translation(source - (offset, 0.0, 0.0), PoleTarget.of(target), 3.0)
         np.testing.assert_allclose(got, (expected, 0.0, 0.0), atol=1e-9, err_msg=f"{offset}, {with_signs}")
+    occluded = target_posts[~np.all(np.isclose(target_posts[:, :2], (12.0, POST_Y_M)), axis=1)]
+    got = pole_translation(posts(seen) - (1.5, 0.0, 0.0), PoleTarget.of(occluded), 3.0)
+    np.testing.assert_allclose(got, (1.5, 0.0, 0.0), atol=1e-9)
     assert pole_translation(posts([0.0]), PoleTarget.of(target_posts), 3.0) is None  # too few to agree
 
 
