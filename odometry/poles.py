@@ -184,10 +184,10 @@ def pole_translation(source: np.ndarray, target: PoleTarget, bound_m: float) -> 
     candidates = offsets[near]  # (K, 2)
     if len(candidates) == 0:
         return None
+    own = [offsets[i][near[i]] for i in range(len(src))]  # each source pole's offsets within the bound
     # (K, P): does source pole i have a target pole within the radius of candidate k's offset?
     agree = np.zeros((len(candidates), len(src)), dtype=bool)
-    for i in range(len(src)):
-        o = offsets[i][near[i]]  # that pole's own offsets within the bound
+    for i, o in enumerate(own):
         if len(o):
             d = np.hypot(o[None, :, 0] - candidates[:, None, 0], o[None, :, 1] - candidates[:, None, 1])
             agree[:, i] = (d <= CONSENSUS_RADIUS_M).any(axis=1)
@@ -199,7 +199,6 @@ def pole_translation(source: np.ndarray, target: PoleTarget, bound_m: float) -> 
     # the mean of each agreeing pole's offset nearest the winner
     chosen = []
     for i in np.flatnonzero(agree[best]):
-        o = offsets[i][near[i]]
-        chosen.append(o[np.argmin(np.hypot(*(o - candidates[best]).T))])
+        chosen.append(own[i][np.argmin(np.hypot(*(own[i] - candidates[best]).T))])
     mean = np.mean(chosen, axis=0)
     return np.array([mean[0], mean[1], 0.0])
