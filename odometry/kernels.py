@@ -567,3 +567,35 @@ def foreground_runs(image: np.ndarray, points: np.ndarray, times: np.ndarray, az
                     k += 1
             i = j + 1
     return centroids[:k], counts[:k], mean_times[:k]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def consensus_votes(offsets: np.ndarray, starts: np.ndarray, radius: float) -> np.ndarray:
+    """(K,) for each of (K, 2) ``offsets``, how many groups hold an offset within ``radius`` of it.
+
+    Group g is rows ``starts[g]:starts[g + 1]``, sorted by x within the group (so only a band of
+    x is tested). numpy: ``[sum(np.any(np.hypot(*(offsets[s:e] - o).T) <= radius) for s, e in
+    zip(starts[:-1], starts[1:])) for o in offsets]``.
+    """
+    band = radius * (1.0 + 1e-9)  # (a hair wider than the test: the band only skips rows)
+    votes = np.zeros(offsets.shape[0], dtype=np.int64)
+    for k in range(offsets.shape[0]):
+        x, y = offsets[k, 0], offsets[k, 1]
+        n = 0
+        for g in range(len(starts) - 1):
+            lo, hi = starts[g], starts[g + 1]
+            end = hi
+            while lo < hi:  # the group's first row with x >= x - band
+                mid = (lo + hi) // 2
+                if offsets[mid, 0] < x - band:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            j = lo
+            while j < end and offsets[j, 0] <= x + band:
+                if math.hypot(offsets[j, 0] - x, offsets[j, 1] - y) <= radius:
+                    n += 1
+                    break
+                j += 1
+        votes[k] = n
+    return votes

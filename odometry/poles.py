@@ -42,7 +42,7 @@ import numpy as np
 from simlidar import se3
 
 from .kdtree import KDTree
-from .kernels import foreground_runs
+from .kernels import consensus_votes, foreground_runs
 from .scan_lines import range_image
 
 # A run's returns are at one range within this (m, and a fraction of the range: noise and the
@@ -181,24 +181,26 @@ def pole_translation(source: np.ndarray, target: PoleTarget, bound_m: float) -> 
         return None
     offsets = dst[None, :, :] - src[:, None, :]  # (P, Q, 2): target minus source
     near = np.hypot(offsets[..., 0], offsets[..., 1]) <= bound_m
-    candidates = offsets[near]  # (K, 2)
+    candidates = offsets[near]  # (K, 2), grouped by source pole
     if len(candidates) == 0:
         return None
-    own = [offsets[i][near[i]] for i in range(len(src))]  # each source pole's offsets within the bound
-    # (K, P): does source pole i have a target pole within the radius of candidate k's offset?
-    agree = np.zeros((len(candidates), len(src)), dtype=bool)
-    for i, o in enumerate(own):
-        if len(o):
-            d = np.hypot(o[None, :, 0] - candidates[:, None, 0], o[None, :, 1] - candidates[:, None, 1])
-            agree[:, i] = (d <= CONSENSUS_RADIUS_M).any(axis=1)
-    votes = agree.sum(axis=1)
+    owner = np.nonzero(near)[0]  # (K,) the source pole of each candidate
+    starts = np.searchsorted(owner, np.arange(len(src) + 1))  # source pole i's candidates: starts[i]:starts[i + 1]
+    # Candidate k gets source pole i's vote when one of i's candidates lies within the radius of it
+    # (compiled: a pole on many rings is many poles at one place, so the candidates crowd, and a dense
+    # sensor's first scans give thousands; numpy's all-pairs test took half a second there).
+    order = np.lexsort((candidates[:, 0], owner))
+    votes = np.empty(len(candidates), dtype=np.int64)
+    votes[order] = consensus_votes(np.ascontiguousarray(candidates[order]), starts, CONSENSUS_RADIUS_M)
     if votes.max() < MIN_CONSENSUS:
         return None
     likely = np.flatnonzero(votes >= max(ALIAS_VOTE_RATIO * votes.max(), MIN_CONSENSUS))
     best = likely[np.argmin(np.hypot(candidates[likely, 0], candidates[likely, 1]))]
     # the mean of each agreeing pole's offset nearest the winner
+    d = np.hypot(*(candidates - candidates[best]).T)
     chosen = []
-    for i in np.flatnonzero(agree[best]):
-        chosen.append(own[i][np.argmin(np.hypot(*(own[i] - candidates[best]).T))])
+    for i in np.unique(owner[d <= CONSENSUS_RADIUS_M]):
+        s, e = starts[i], starts[i + 1]
+        chosen.append(candidates[s + np.argmin(d[s:e])])
     mean = np.mean(chosen, axis=0)
     return np.array([mean[0], mean[1], 0.0])

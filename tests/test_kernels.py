@@ -207,3 +207,19 @@ def test_fill_range_image_is_numpys_assignment_of_rows_to_cells():
     expect = np.full((16, 900), -1, dtype=np.int64)
     expect[rings, azimuth_columns(points, 900)] = np.arange(20000)  # (repeated cells: the last row)
     np.testing.assert_array_equal(kernels.fill_range_image(rings, points, 16, 900), expect)
+
+
+def test_consensus_votes_count_the_groups_with_an_offset_within_the_radius():
+    rng = np.random.default_rng(7)
+    # crowded offsets (a pole on many rings is many poles at one place), with empty groups among them
+    sizes = rng.integers(0, 12, size=40)
+    owner = np.repeat(np.arange(40), sizes)
+    centres = rng.uniform(-1.5, 1.5, size=(8, 2))
+    offsets = centres[rng.integers(0, 8, size=len(owner))] + rng.normal(scale=0.15, size=(len(owner), 2))
+    offsets[::7, 0] = np.round(offsets[::7, 0], 1)  # ties in x
+    order = np.lexsort((offsets[:, 0], owner))
+    offsets, owner = offsets[order], owner[order]
+    starts = np.searchsorted(owner, np.arange(41))
+    expected = [sum(bool(np.any(np.hypot(*(offsets[s:e] - o).T) <= 0.25)) for s, e in zip(starts[:-1], starts[1:]))
+                for o in offsets]
+    np.testing.assert_array_equal(kernels.consensus_votes(offsets, starts, 0.25), expected)
