@@ -314,20 +314,42 @@ def voxel_sums(slot: np.ndarray, k: int, points: np.ndarray, values: np.ndarray
 
 
 @njit(cache=True, nogil=True)
-def group_sorted(keys: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """((K,) the distinct keys ascending, (N,) the slot of each key among them), given ``order``,
-    (N,) an argsort of the (N,) keys: ``numpy.unique(keys, return_inverse=True)`` in one pass."""
+def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((K,) the distinct keys ascending, (N,) the slot of each key among them):
+    ``numpy.unique(keys, return_inverse=True)`` for (N,) int64 keys.
+
+    The keys are grouped by a hash table in one pass and only the K distinct ones are sorted
+    (a scan has several points per voxel: sorting the N keys took most of a voxel grid's time).
+    """
     n = keys.shape[0]
-    slot = np.empty(n, dtype=np.int64)
-    distinct = np.empty(n, dtype=np.int64)
-    k = -1
-    for i in range(n):
-        key = keys[order[i]]
-        if k < 0 or key != distinct[k]:
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    shift = np.uint64(64 - max(int(np.log2(size)), 1))
+    table_key = np.empty(size, dtype=np.int64)
+    table_id = np.full(size, -1, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)  # the distinct keys, in order of first appearance
+    provisional = np.empty(n, dtype=np.int64)
+    k = 0
+    for r in range(n):
+        key = keys[r]
+        h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+        while table_id[h] >= 0 and table_key[h] != key:
+            h = (h + 1) & (size - 1)
+        if table_id[h] < 0:
+            table_key[h] = key
+            table_id[h] = k
+            first[k] = key
             k += 1
-            distinct[k] = key
-        slot[order[i]] = k
-    return distinct[:k + 1], slot
+        provisional[r] = table_id[h]
+    order = np.argsort(first[:k])
+    rank = np.empty(k, dtype=np.int64)
+    for i in range(k):
+        rank[order[i]] = i
+    slot = np.empty(n, dtype=np.int64)
+    for r in range(n):
+        slot[r] = rank[provisional[r]]
+    return first[:k][order], slot
 
 
 @njit(cache=True, nogil=True, inline="always")

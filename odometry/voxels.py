@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import group_sorted, packed_voxel_keys, voxel_sums
+from .kernels import group_keys, packed_voxel_keys, voxel_sums
 
 _KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
@@ -53,7 +53,7 @@ def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray 
         return np.zeros((0, 3)) if values is None else (np.zeros((0, 3)), np.zeros(0))
     points = np.ascontiguousarray(points, dtype=np.float64)
     keys = voxel_keys(points, voxel_size_m)
-    voxels, slot = group_sorted(keys, np.argsort(keys))
+    voxels, slot = group_keys(keys)
     v = np.zeros(0) if values is None else np.ascontiguousarray(values, dtype=np.float64)
     if values is not None and v.shape != (len(points),):
         raise ValueError(f"need one value per point ({len(points)},), got {v.shape}")

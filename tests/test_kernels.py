@@ -104,11 +104,12 @@ def test_reusable_matches_keep_only_nearest_neighbours_they_can_prove():
 def test_voxel_keys_and_grouping_agree_with_numpy():
     rng = np.random.default_rng(5)
     p = rng.uniform(-60, 60, size=(20000, 3))
+    p[::3] = p[1::3][: len(p[::3])] + rng.uniform(-0.1, 0.1, size=(len(p[::3]), 3))  # voxels of several points
     keys, inside = kernels.packed_voxel_keys(p, 0.35, 21)
     ijk = np.floor(p / 0.35).astype(np.int64) + (1 << 20)
     assert inside
     np.testing.assert_array_equal(keys, (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2])
-    distinct, slot = kernels.group_sorted(keys, np.argsort(keys))
+    distinct, slot = kernels.group_keys(keys)
     u, inverse = np.unique(keys, return_inverse=True)
     np.testing.assert_array_equal(distinct, u)
     np.testing.assert_array_equal(slot, inverse)
@@ -220,6 +221,6 @@ def test_consensus_votes_count_the_groups_with_an_offset_within_the_radius():
     order = np.lexsort((offsets[:, 0], owner))
     offsets, owner = offsets[order], owner[order]
     starts = np.searchsorted(owner, np.arange(41))
-    expected = [sum(bool(np.any(np.hypot(*(offsets[s:e] - o).T) <= 0.25)) for s, e in zip(starts[:-1], starts[1:]))
-                for o in offsets]
+    groups = list(zip(starts[:-1], starts[1:], strict=True))
+    expected = [sum(bool(np.any(np.hypot(*(offsets[s:e] - o).T) <= 0.25)) for s, e in groups) for o in offsets]
     np.testing.assert_array_equal(kernels.consensus_votes(offsets, starts, 0.25), expected)
