@@ -74,6 +74,8 @@ class FilteredScan:
     points_tree: (the points it was started on, a future of the k-d tree over them), started on the
         background thread when the scan becomes the next scan-to-scan target; None before.
     poles: the scan's poles (``odometry.poles``), de-skewed as ``points`` are, or None (not extracted).
+    centroid_rows: (M,) the row of ``centroids`` each point is, when the points are the centroids thinned
+        (``filter.source_voxel_size_m``), else None.
     """
 
     points: np.ndarray
@@ -89,6 +91,7 @@ class FilteredScan:
     seconds: dict = field(default_factory=dict)
     points_tree: tuple[np.ndarray, Future] | None = None
     poles: Poles | None = None
+    centroid_rows: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -145,6 +148,8 @@ def filter_scan(
     if config.filter.source_voxel_size_m is not None and config.match.target == "map":
         t = time.perf_counter()
         rows = first_per_voxel(scan.points, config.filter.source_voxel_size_m)
+        if scan.points is scan.centroids:
+            scan.centroid_rows = rows
         scan.points, scan.normals = scan.points[rows], scan.normals[rows]
         scan.normal_std_rad = scan.normal_std_rad[rows]
         scan.rings = None if scan.rings is None else scan.rings[rows]

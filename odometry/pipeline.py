@@ -663,24 +663,33 @@ class Odometry:
         st.target_motion = T if redo else T_deskew
         if st.local_map is not None:
             points_world = map_points(scan, pose)
-            st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(points_world, target))
+            st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(scan, points_world, target))
         if st.pole_map is not None and scan.poles is not None:
             st.pole_map.add(se3.transform_points(pose, scan.poles.points))
         stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
         seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t
 
-    def _map_nearest_m(self, points_world: np.ndarray, target: Target | None) -> np.ndarray | None:
+    def _map_nearest_m(self, scan: FilteredScan, points_world: np.ndarray, target: Target | None
+                       ) -> np.ndarray | None:
         """(N,) each world point's distance to its nearest map point, inf beyond the match bound, m: the
         map's spacing check without a search of its own where the ICP's last one still holds
-        (``icp.match``: the points moved by millimetres since). None when ``target`` is not the map
-        as it stands, or the bound is below the map's point spacing (the answer would not decide)."""
+        (``icp.match``: the points moved by millimetres since; a thinned source's points are some of the
+        centroids, the rest are searched). None when ``target`` is not the map as it stands, or the
+        bound is below the map's point spacing (the answer would not decide)."""
         st, bound = self.state, self.config.match.max_correspondence_distance_m
         if (target is None or st.local_map is None or target.points is not st.local_map.points
                 or st.local_map.min_spacing_m > bound):
             return None
-        m = match(points_world, target, bound)
         nearest = np.full(len(points_world), np.inf)
-        nearest[m.source_index] = m.distance_m
+        rows = scan.centroid_rows
+        if rows is None or len(rows) == len(points_world):
+            m = match(points_world, target, bound)
+            nearest[m.source_index] = m.distance_m
+            return nearest
+        m = match(points_world.take(rows, axis=0), target, bound)
+        nearest[rows[m.source_index]] = m.distance_m
+        others = np.setdiff1d(np.arange(len(points_world)), rows, assume_unique=True)
+        nearest[others], _ = target.tree.query(points_world.take(others, axis=0), k=1, distance_upper_bound=bound)
         return nearest
 
     def _target(self) -> Target:

@@ -137,6 +137,7 @@ def test_source_thinning_keeps_the_map_points():
     assert len(b.points) == len(np.unique(np.floor(a.centroids / 1.0), axis=0)) == 1600
     assert np.isin(b.points.view("f8,f8,f8"), a.centroids.view("f8,f8,f8")).all()
     assert b.counts["source"] == len(b.points)
+    assert np.array_equal(b.centroids[b.centroid_rows], b.points) and a.centroid_rows is None
     scan_to_scan = variant("bl").replace(filter={"source_voxel_size_m": 1.0})  # (ignored there)
     assert len(filter_scan(ground, scan_to_scan).points) == len(filter_scan(ground, variant("bl")).points)
     with pytest.raises(ConfigError, match="at least filter.voxel_size_m"):

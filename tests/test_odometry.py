@@ -315,6 +315,31 @@ def test_capped_refinements_take_fewer_iterations_and_stay_on_the_truth(city_seq
     assert errors[None] < 0.05 and errors[1] < 1.25 * errors[None] + 0.005, errors
 
 
+def test_the_maps_spacing_check_answers_as_a_search_with_a_thinned_source(city_sequence, monkeypatch):
+    """The map's spacing check takes each new point's distance to the map from the ICP's last search
+    (``Odometry._map_nearest_m``); with a thinned source (``filter.source_voxel_size_m``) only some
+    centroids were searched by the ICP and the rest are searched then. Every distance must be what a
+    search of the map gives (inf beyond the match bound)."""
+    from odometry.local_map import LocalMap
+
+    checked = []
+    update = LocalMap.update
+
+    def checking_update(self, points_world, sensor_position_m, payload=None, nearest_m=None):
+        if nearest_m is not None:
+            d, _ = KDTree(self.points).query(points_world, k=1, distance_upper_bound=1.0)
+            assert np.array_equal(nearest_m, d)
+            checked.append(len(points_world))
+        return update(self, points_world, sensor_position_m, payload, nearest_m)
+
+    monkeypatch.setattr(LocalMap, "update", checking_update)
+    cfg = variant(DEFAULT_VARIANT).replace(filter={"source_voxel_size_m": 0.7})
+    assert cfg.match.max_correspondence_distance_m == 1.0
+    run = run_sequence(city_sequence, cfg, frames=slice(0, 6), prefetch=0)
+    assert len(checked) == 4  # (frames 2-5: the first two rebuild the map after the cold start)
+    assert all(d.filter_counts["source"] < d.filter_counts["voxels"] for d in run.diagnostics)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name, changes", [("salo", {}), (DEFAULT_VARIANT, {}), ("bl", {"match": {"target": "raw"}}),
                                            ("salo", {"deskew": {"enabled": False}})])
