@@ -72,6 +72,9 @@ class DeskewParams(_Stage):
 
     section_name = "deskew"
     enabled: bool = param(True, "de-skew with the constant-velocity motion")
+    joint: bool = param(False, "re-de-skew the scan at every ICP step with the estimate so far (the damped "
+                        "update of the refinements, per step) instead of refinements after the ICP; the first "
+                        "registration of a sequence keeps the refinements")
     refinements: int = param(2, "after the ICP, redo the de-skew with the frame's own motion and refine, this "
                              "many times (0: the previous motion only)", min=0)
     refinement_iterations: int | None = param(

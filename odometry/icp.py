@@ -239,6 +239,7 @@ def register(
     rejectors: Sequence[Rejector] | None = None,
     T_target_previous: np.ndarray | None = None,
     motion_prior: bool = True,
+    reskew: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> RegistrationResult:
     """Alg. 1's loop: estimate ``T_target_source`` starting from ``T_init`` (4, 4).
 
@@ -257,6 +258,9 @@ def register(
     Poles of the source and target (``odometry.poles``) add two horizontal rows per match
     within the same bound (untrimmed: they are few, and the farthest are the evidence of a
     motion the planes do not see).
+    ``reskew(T) -> (6,) twist``: after each step, re-de-skews the source (its points and poles, in
+    place) for the estimate ``T`` and returns how far the de-skew motion moved (``deskew.joint``);
+    the loop ends when both the step and that are below the termination thresholds.
     """
     rejectors = rejectors_for(config) if rejectors is None else rejectors
     T = np.array(T_init, dtype=float)
@@ -317,7 +321,11 @@ def register(
         inc = step.increment
         T = inc @ T
         T[:3, 3] += centre - inc[:3, :3] @ centre
-        if converged(step.xi, T if T_target_previous is None else se3.inverse(T_target_previous) @ T, config):
+        motion = T if T_target_previous is None else se3.inverse(T_target_previous) @ T
+        done = converged(step.xi, motion, config)
+        if reskew is not None:
+            done &= converged(reskew(T), motion, config)
+        if done:
             res.converged = True
             break
     res.seconds = seconds
