@@ -72,11 +72,11 @@ class DeskewParams(_Stage):
 
     section_name = "deskew"
     enabled: bool = param(True, "de-skew with the constant-velocity motion")
-    joint: bool = param(False, "re-de-skew the scan at every ICP step with the estimate so far (the damped "
-                        "update of the refinements, per step) instead of refinements after the ICP; the first "
-                        "registration of a sequence keeps the refinements")
-    refinements: int = param(2, "after the ICP, redo the de-skew with the frame's own motion and refine, this "
-                             "many times (0: the previous motion only)", min=0)
+    joint: bool = param(True, "re-de-skew the scan at every ICP step, halfway from its de-skew motion towards "
+                        "the estimate's (the damped update of the refinements, per step); false: only in the "
+                        "refinements after the ICP. The first registration of a sequence has refinements only")
+    refinements: int = param(1, "after the ICP, redo the de-skew with the frame's own motion and register again "
+                             "from its estimate, this many times (0: none)", min=0)
     refinement_iterations: int | None = param(
         None, "iteration cap of each refinement's ICP, which starts from the frame's estimate (null: "
         "icp.max_iterations; 1: one Gauss-Newton step with the re-de-skewed points)", min=1)

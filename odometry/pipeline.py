@@ -601,7 +601,7 @@ class Odometry:
         # estimate (a damped fixed-point iteration) and refine. Only the filtered points move.
         if not first and deskewing and cfg.deskew.joint:
             T_deskew = T_deskew_joint
-        for _ in range(cfg.deskew.refinements if deskewing and (first or not cfg.deskew.joint) else 0):
+        for _ in range(cfg.deskew.refinements if deskewing else 0):
             if result.singular:
                 break
             motion = motion_of(result.T_target_source)
