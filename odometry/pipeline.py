@@ -252,7 +252,12 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
     given: the de-skew refinements leave them, since only the frame's final motion matters to the map.
     """
     same = scan.points is scan.centroids  # (the ICP points are the centroids: move them once)
-    scan.points, scan.normals = redeskew(scan.points, scan.normals, scan.times_s, old_motion, new_motion, period_s)
+    # (a scan registered against a map has no normals of its own: nan rows, which stay nan)
+    without_normals = len(scan.normals) > 0 and bool(np.isnan(scan.normals[:, 0]).all())
+    scan.points, normals = redeskew(scan.points, None if without_normals else scan.normals, scan.times_s,
+                                    old_motion, new_motion, period_s)
+    if not without_normals:
+        scan.normals = normals
     poles = scan.poles
     if poles is not None and poles.times_s is not None and len(poles):
         poles.points, _ = redeskew(poles.points, None, poles.times_s, old_motion, new_motion, period_s)
