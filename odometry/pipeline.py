@@ -353,7 +353,8 @@ class Odometry:
         filter       filter_scan: voxel grid -> kNN normals -> NCF -> curvature; poles.extract_poles
         source       make_source: points, normals, GCR thresholds
         target       the previous scan (scan_target) or the local map (LocalMap.target)
-        register     icp.register from the constant-velocity prediction
+        register     icp.register from the constant-velocity prediction (deskew.joint: the scan
+                     re-de-skewed at every step, halfway towards the estimate's motion)
         refine       re-de-skew with the frame's own estimate and register again
         update       pose, motion, next target / map insertion
     """
