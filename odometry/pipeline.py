@@ -896,11 +896,12 @@ class ScanInput(NamedTuple):
 
 # Scans prepared ahead by default (``register_frames``). Where a scan's preparation holds its normals and
 # NCF (scan-to-scan, about as long as its registration) two threads preparing the next two keep both cores
-# busy; one ahead left the registering thread waiting. Where it is a voxel grid only (the map variants:
-# their normals are the map's) one ahead: on 100 city frames the default ran 10-20 % faster so on hdl32e,
-# 5-8 % slower on salo32, and two ahead no faster than none (README, "Benchmarks").
+# busy; one ahead left the registering thread waiting. Where it is a voxel grid and poles only (the map
+# variants: their normals are the map's) none: since the voxel grid got cheaper, one ahead slowed the
+# registering thread by about as much as it saved (100 city frames, 3 rounds: the default at 1.34x against
+# 1.28x KISS-ICP's time on hdl32e, 1.11x either way on salo32; README, "Benchmarks").
 PREFETCH_SCANS = 2
-PREFETCH_SCANS_WITHOUT_NORMALS = 1
+PREFETCH_SCANS_WITHOUT_NORMALS = 0
 # The environment variable that overrides both (a worker pool whose processes have a core each sets 0).
 PREFETCH_ENV = "SALO_PREFETCH_SCANS"
 
