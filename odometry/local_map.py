@@ -34,7 +34,6 @@ import numpy as np
 from .filters import background
 from .icp import Target
 from .kdtree import KDTree
-from .kernels import group_keys
 from .ncf import ncf_keep, normal_covariance_along_beams
 from .normals import knn, local_pca
 from .voxels import neighbour_key_steps, voxel_centres, voxel_keys
@@ -323,7 +322,7 @@ class LocalMap:
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
         """Occupied voxels and their counts from (key, count change) pairs."""
-        uniq, inverse = group_keys(keys)
+        uniq, inverse = np.unique(keys, return_inverse=True)  # (the map's voxels arrive sorted: numpy's sort is fast)
         total = np.bincount(inverse, weights=counts, minlength=len(uniq)).astype(np.int64)
         keep = total > 0
         self._voxel_keys, self._voxel_counts = uniq[keep], total[keep]
