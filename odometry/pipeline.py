@@ -560,6 +560,7 @@ class Odometry:
         source = make_source(scan, cfg, self.sensor, chain is self._chain_with_gcr)
         T_init = T_target_prev @ T_guess
         runs: list[RegistrationResult] = []  # (every registration run: their time and iterations count)
+        T_deskew = T_guess  # the motion the scan is de-skewed with now
 
         def motion_of(T_target_cur: np.ndarray) -> np.ndarray:
             return T_target_cur if previous_is_target else se3.inverse(T_target_prev) @ T_target_cur
@@ -582,31 +583,23 @@ class Odometry:
             if deskewing and cfg.deskew.joint:
                 # (the damped update of the refinements below, at every step: the de-skew motion moves
                 # halfway towards the estimate's, and the step and that move must both be small to stop)
-                deskewed_with = [T_guess]
-
                 def reskew(T_target_cur: np.ndarray) -> np.ndarray:
-                    old = deskewed_with[0]
-                    new = se3.exp(0.5 * (se3.log(old) + se3.log(motion_of(T_target_cur))))
-                    redeskew_scan(scan, old, new, period)
+                    nonlocal T_deskew
+                    old, T_deskew = T_deskew, se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion_of(T_target_cur))))
+                    redeskew_scan(scan, old, T_deskew, period)
                     source.points = scan.points
                     source.poles = None if scan.poles is None else scan.poles.points
-                    deskewed_with[0] = new
-                    return se3.log(se3.inverse(old) @ new)
+                    return se3.log(se3.inverse(old) @ T_deskew)
 
             result = register(source, target, T_init, cfg, chain, T_target_prev, reskew=reskew)
             runs.append(result)
-            if reskew is not None:
-                T_deskew_joint = deskewed_with[0]
         icp_seconds = {stage: sum(r.seconds.get(stage, 0.0) for r in runs) for stage in runs[-1].seconds}
         icp_iterations = sum(r.iterations for r in runs)
-        T_deskew = T_guess
 
         # The de-skew used the previous frame's motion. The estimate responds to the de-skew
         # motion with a gain near -1 (a too-fast de-skew makes the scan look closer), so plain
         # re-use of the estimate oscillates: move the de-skew motion halfway towards the
         # estimate (a damped fixed-point iteration) and refine. Only the filtered points move.
-        if not first and deskewing and cfg.deskew.joint:
-            T_deskew = T_deskew_joint
         for _ in range(cfg.deskew.refinements if deskewing else 0):
             if result.singular:
                 break
