@@ -621,3 +621,125 @@ def consensus_votes(offsets: np.ndarray, starts: np.ndarray, radius: float) -> n
                 j += 1
         votes[k] = n
     return votes
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def gathered_scatter(points: np.ndarray, neighbours: np.ndarray, at: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``neighbourhood_scatter(points[neighbours])`` without gathering the (M, k, 3) neighbourhoods,
+    and the (M,) distance from each of ``at`` (M, 3) to its last neighbour (the farthest), m.
+
+    points: (N, 3) m; neighbours: (M, k) rows of ``points``, nearest first. Returns ((M, 3) mean,
+    (M, 3, 3) scatter, (M,) ``norm(points[neighbours[:, -1]] - at, axis=1)``).
+    """
+    m, k = neighbours.shape[0], neighbours.shape[1]
+    mean = np.empty((m, 3))
+    S = np.empty((m, 3, 3))
+    reach = np.empty(m)
+    for i in range(m):
+        mx = my = mz = 0.0
+        for j in range(k):
+            r = neighbours[i, j]
+            mx += points[r, 0]
+            my += points[r, 1]
+            mz += points[r, 2]
+        mx, my, mz = mx / k, my / k, mz / k
+        sxx = sxy = sxz = syy = syz = szz = 0.0
+        for j in range(k):
+            r = neighbours[i, j]
+            dx, dy, dz = points[r, 0] - mx, points[r, 1] - my, points[r, 2] - mz
+            sxx += dx * dx
+            sxy += dx * dy
+            sxz += dx * dz
+            syy += dy * dy
+            syz += dy * dz
+            szz += dz * dz
+        mean[i, 0], mean[i, 1], mean[i, 2] = mx, my, mz
+        S[i, 0, 0], S[i, 0, 1], S[i, 0, 2] = sxx, sxy, sxz
+        S[i, 1, 0], S[i, 1, 1], S[i, 1, 2] = sxy, syy, syz
+        S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = sxz, syz, szz
+        far = neighbours[i, k - 1]
+        dx, dy, dz = points[far, 0] - at[i, 0], points[far, 1] - at[i, 1], points[far, 2] - at[i, 2]
+        reach[i] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return mean, S, reach
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def map_normal_verdicts(points: np.ndarray, beams: np.ndarray, elevations: np.ndarray, origins: np.ndarray,
+                        neighbours: np.ndarray, at: np.ndarray, mean: np.ndarray, lam: np.ndarray, V: np.ndarray,
+                        min_lam1_m2: float, max_curvature: float, min_elevation_spread_rad: float,
+                        min_baseline_m: float, range_var_m2: float, degenerate_gap: float,
+                        gap_margin_per_m2: float) -> tuple[np.ndarray, np.ndarray]:
+    """A map's target normals from their neighbourhoods' PCA, and the NCF's variance of each, in one pass.
+
+    points, beams (N, 3): the map's points (m) and the unit beams that measured them; elevations (N,)
+    those beams' elevations, rad; origins (N, 3) where from, m; neighbours (M, k) rows, nearest
+    first; at (M, 3) the points the normals belong to; mean (M, 3), lam (M, 3) descending scatter
+    eigenvalues (m^2), V (M, 3, 3) axes as columns (``symmetric_eigh_descending`` of the scatter;
+    oriented here in place: V[:, :, 1:] flipped so that the normal faces the origin).
+    Returns (M, 3) normals, nan where ``odometry.local_map.plane_normals_valid`` (with
+    ``min_lam1_m2`` = (sigmas x noise)^2, ``max_curvature``) or ``spans_two_scan_lines`` says no
+    plane, and (M,) the largest eigenvalue of the normal's covariance
+    (``odometry.ncf.normal_covariance_along_beams(...).max_variance_rad2``, noise-free gaps: its
+    ``range_var_m2``, ``degenerate_gap`` = ``ncf.DEGENERATE_GAP`` and ``gap_margin_per_m2`` =
+    z sqrt(2 / (k - 1))), inf where the normal is undefined.
+    """
+    m, k = neighbours.shape[0], neighbours.shape[1]
+    normals = np.empty((m, 3))
+    variance = np.empty(m)
+    noise_scale = (k - 1) / k * range_var_m2
+    for i in range(m):
+        # orientation (``local_pca``: towards the origin)
+        if V[i, 0, 2] * at[i, 0] + V[i, 1, 2] * at[i, 1] + V[i, 2, 2] * at[i, 2] > 0:
+            for a in range(3):
+                V[i, a, 1] = -V[i, a, 1]
+                V[i, a, 2] = -V[i, a, 2]
+        l0, l1, l2 = lam[i, 0], lam[i, 1], lam[i, 2]
+        # a plane: wide along its second axis, flat (PCL curvature), finite
+        total = max(l0, 0.0) + max(l1, 0.0) + max(l2, 0.0)
+        curvature = max(l2, 0.0) / total if total > 0 else np.nan
+        ok = l1 / k > min_lam1_m2 and curvature <= max_curvature
+        for a in range(3):
+            ok = ok and math.isfinite(V[i, a, 2])
+        # two scan lines: two rings, or one ring seen from two places
+        lo = hi = elevations[neighbours[i, 0]]
+        for j in range(1, k):
+            e = elevations[neighbours[i, j]]
+            lo, hi = min(lo, e), max(hi, e)
+        if ok and not hi - lo > min_elevation_spread_rad:
+            spread2 = 0.0
+            for a in range(3):
+                lo = hi = origins[neighbours[i, 0], a]
+                for j in range(1, k):
+                    o = origins[neighbours[i, j], a]
+                    lo, hi = min(lo, o), max(hi, o)
+                spread2 += (hi - lo) * (hi - lo)
+            ok = math.sqrt(spread2) > min_baseline_m
+        for a in range(3):
+            normals[i, a] = V[i, a, 2] if ok else np.nan
+        # the NCF (``beam_noise_moments``, the debiased gaps, the 2 x 2 covariance's major eigenvalue)
+        s00 = s01 = s11 = q0 = q1 = q2 = 0.0
+        for j in range(k):
+            r = neighbours[i, j]
+            dx, dy, dz = points[r, 0] - mean[i, 0], points[r, 1] - mean[i, 1], points[r, 2] - mean[i, 2]
+            a0, a1, h = _in_axes(V, i, dx, dy, dz)
+            c0, c1, c2 = _in_axes(V, i, beams[r, 0], beams[r, 1], beams[r, 2])
+            z0, z1 = h * c0 + a0 * c2, h * c1 + a1 * c2
+            s00 += z0 * z0
+            s01 += z0 * z1
+            s11 += z1 * z1
+            q0 += c0 * c0
+            q1 += c1 * c1
+            q2 += c2 * c2
+        tol = degenerate_gap * l0
+        g0, g1 = l0 - l2, l1 - l2
+        bad = not (g1 > tol) or not (g0 > tol) or not math.isfinite(l0)
+        n0, n1, n2 = noise_scale * q0, noise_scale * q1, noise_scale * q2
+        g0, g1 = g0 - (n0 - n2), g1 - (n1 - n2)
+        bad = bad or not (g1 > gap_margin_per_m2 * n1) or not (g1 > tol) or not (g0 > tol)
+        c00 = range_var_m2 * s00 / (g0 * g0)
+        c01 = range_var_m2 * s01 / (g0 * g1)
+        c11 = range_var_m2 * s11 / (g1 * g1)
+        major = 0.5 * (c00 + c11) + math.hypot(0.5 * (c00 - c11), c01)
+        variance[i] = np.inf if bad else major
+    return normals, variance

@@ -27,6 +27,7 @@ one scan line do not define a plane) and its curvature be below
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,8 +35,9 @@ import numpy as np
 from .filters import background
 from .icp import Target
 from .kdtree import KDTree
-from .ncf import ncf_keep, normal_covariance_along_beams
-from .normals import knn, local_pca
+from .kernels import gathered_scatter, map_normal_verdicts
+from .ncf import DEFAULT_GAP_SIGNIFICANCE_Z, DEGENERATE_GAP, ncf_keep
+from .normals import knn, symmetric_eigh_descending
 from .voxels import neighbour_key_steps, voxel_centres, voxel_keys
 
 # A map neighbourhood is a plane only if it extends this many range-noise sigmas along its second axis,
@@ -339,20 +341,20 @@ class LocalMap:
             if k < 3:
                 return np.full((len(rows), 3), np.nan), None
             # (a normal's sign does not matter to a point-to-plane residual: r and J flip together)
-            # (take: numpy's fast gather of rows; the neighbourhoods are gathered once for every test)
-            at = points.take(rows, axis=0)
+            at = points.take(rows, axis=0)  # (take: numpy's fast gather of rows)
             nb = knn(points, at, k, tree=tree)
-            hood, hood_beams = points.take(nb, axis=0), beams.take(nb, axis=0)  # (len(rows), k, 3)
-            reach[rows] = np.linalg.norm(hood[:, -1] - at, axis=1)  # (knn: nearest first)
-            est = local_pca(hood, query_points=at)
-            n = est.normals.copy()
-            valid = plane_normals_valid(est, self.noise_std_m, self.max_curvature)
-            valid &= spans_two_scan_lines(nb, elevations, origins)
-            n[~valid] = np.nan
+            # (compiled: ``plane_normals_valid``, ``spans_two_scan_lines`` and the NCF of
+            # ``normal_covariance_along_beams`` in one pass over the neighbourhoods, as tested)
+            mean, scatter, reach[rows] = gathered_scatter(points, nb, at)
+            lam, V = symmetric_eigh_descending(scatter)
+            n, variance = map_normal_verdicts(
+                points, beams, elevations, origins, nb, at, mean, lam, V,
+                (MIN_PLANE_EXTENT_SIGMAS * self.noise_std_m) ** 2, self.max_curvature, MIN_ELEVATION_SPREAD_RAD,
+                MIN_BASELINE_M, self.noise_std_m**2, DEGENERATE_GAP,
+                DEFAULT_GAP_SIGNIFICANCE_Z * math.sqrt(2.0 / max(k - 1, 1)))
             if self.ncf_c_tau_rad2 is None:
                 return n, None
-            nc = normal_covariance_along_beams(hood, hood_beams, self.noise_std_m, pca=est)
-            return n, ~ncf_keep(nc, self.ncf_c_tau_rad2)
+            return n, ~ncf_keep(variance, self.ncf_c_tau_rad2)
 
         return Target(points, tree, self._normals, normals_of, self._known,
                       self._uncertain if self.ncf_c_tau_rad2 is not None else None)

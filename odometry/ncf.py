@@ -126,7 +126,7 @@ DEFAULT_C_TAU_RAD2 = math.radians(DEFAULT_MAX_NORMAL_STD_DEG) ** 2
 DEFAULT_GAP_SIGNIFICANCE_Z = 2.0
 
 # lambda_1 - lambda_2 below this fraction of lambda_0: the normal is not defined.
-_DEGENERATE_GAP = 1e-12
+DEGENERATE_GAP = 1e-12
 
 
 @dataclass(frozen=True)
@@ -250,7 +250,7 @@ def _sym2(c00: np.ndarray, c01: np.ndarray, c11: np.ndarray) -> np.ndarray:
 def _degenerate(pca: NormalEstimate, gaps: np.ndarray) -> np.ndarray:
     """(M,) bool: the normal is not defined at these eigen-gaps (M, 2)."""
     lam0 = pca.scatter_eigenvalues[:, 0]
-    tol = _DEGENERATE_GAP * lam0
+    tol = DEGENERATE_GAP * lam0
     return ~(gaps[:, 1] > tol) | ~(gaps[:, 0] > tol) | ~np.isfinite(lam0)
 
 

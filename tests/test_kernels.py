@@ -224,3 +224,56 @@ def test_consensus_votes_count_the_groups_with_an_offset_within_the_radius():
     groups = list(zip(starts[:-1], starts[1:], strict=True))
     expected = [sum(bool(np.any(np.hypot(*(offsets[s:e] - o).T) <= 0.25)) for s, e in groups) for o in offsets]
     np.testing.assert_array_equal(kernels.consensus_votes(offsets, starts, 0.25), expected)
+
+
+def test_gathered_scatter_and_map_normal_verdicts_are_the_map_normals_numpy_expressions():
+    """The map's compiled normals (``LocalMap.target``) are the PCA, plane tests and NCF spelled in numpy."""
+    from odometry import local_map
+    from odometry.ncf import DEFAULT_GAP_SIGNIFICANCE_Z, DEGENERATE_GAP, ncf_keep, normal_covariance_along_beams
+    from odometry.normals import local_pca, symmetric_eigh_descending
+
+    rng = np.random.default_rng(7)
+    # ground rings seen from three places, a wall, a pole and scattered clutter: planes, lines and neither
+    origins = np.repeat(np.array([[0.0, 0, 1.8], [0.4, 0, 1.8], [0.8, 0.1, 1.8]]), 1500, axis=0)
+    az = rng.uniform(-np.pi, np.pi, 4500)
+    ring = rng.integers(0, 8, 4500)
+    r = 1.8 / np.tan(np.radians(4.0 + 1.33 * ring))
+    ground = origins + np.column_stack([r * np.cos(az), r * np.sin(az), np.full(4500, -1.8)])
+    wall = np.column_stack([np.full(800, 6.0), rng.uniform(-4, 4, 800), rng.uniform(0, 3, 800)])
+    pole = np.column_stack([np.full(100, 3.0), np.full(100, 2.0), np.linspace(0, 3, 100)])
+    clutter = rng.uniform(-8, 8, size=(300, 3))
+    points = np.vstack([ground, wall, pole, clutter])
+    points += rng.normal(scale=0.01, size=points.shape)
+    from_ = np.vstack([origins, np.zeros((1200, 3)) + [0, 0, 1.8]])
+    beams = points - from_
+    beams /= np.linalg.norm(beams, axis=1, keepdims=True)
+    elevations = local_map.beam_elevation_rad(beams)
+    rows = rng.choice(len(points), 2000, replace=False)
+    at = points[rows]
+    k = 12
+    _, nb = cKDTree(points).query(at, k=k)
+    noise, max_curvature, c_tau = 0.01, 0.05, np.radians(1.5) ** 2
+
+    mean, scatter, reach = kernels.gathered_scatter(points, nb, at)
+    hood = points[nb]
+    mean_np, scatter_np = kernels.neighbourhood_scatter(hood)
+    np.testing.assert_array_equal(mean, mean_np)
+    np.testing.assert_array_equal(scatter, scatter_np)
+    np.testing.assert_array_equal(reach, np.linalg.norm(hood[:, -1] - at, axis=1))
+
+    lam, V = symmetric_eigh_descending(scatter)
+    normals, variance = kernels.map_normal_verdicts(
+        points, beams, elevations, from_, nb, at, mean, lam, V, (local_map.MIN_PLANE_EXTENT_SIGMAS * noise) ** 2,
+        max_curvature, local_map.MIN_ELEVATION_SPREAD_RAD, local_map.MIN_BASELINE_M, noise**2, DEGENERATE_GAP,
+        DEFAULT_GAP_SIGNIFICANCE_Z * np.sqrt(2.0 / (k - 1)))
+    est = local_pca(hood, query_points=at)
+    valid = local_map.plane_normals_valid(est, noise, max_curvature)
+    valid &= local_map.spans_two_scan_lines(nb, elevations, from_)
+    assert 0.2 < valid.mean() < 0.95  # (both verdicts are tested)
+    np.testing.assert_array_equal(np.isfinite(normals[:, 0]), valid)
+    np.testing.assert_array_equal(normals[valid], est.normals[valid])
+    np.testing.assert_array_equal(V, est.axes)  # (oriented in place as local_pca orients them)
+    nc = normal_covariance_along_beams(hood, beams[nb], noise, pca=est)
+    np.testing.assert_array_equal(variance, nc.max_variance_rad2)
+    keep = ncf_keep(variance, c_tau)
+    assert 0.05 < keep.mean() < 0.95
