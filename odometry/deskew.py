@@ -82,8 +82,15 @@ def redeskew(points: np.ndarray, normals: np.ndarray | None, times_s: np.ndarray
     points, normals: (M, 3) de-skewed with ``old_motion`` (normals None: points only);
     times_s: (M,) their times. Returns the (M, 3) points and normals (or None) as
     ``new_motion`` would have de-skewed them: ``T_new(t) T_old(t)^-1`` applied per point.
+    The motions are (4, 4) transforms or their (6,) twists (``se3.log``: a caller moving
+    several arrays by the same motions takes the logarithms once).
     """
     s = np.asarray(times_s) / frame_period_s
-    xi_old, xi_new = se3.log(old_motion), se3.log(new_motion)
-    p, n = _screw(-xi_old, s, points, normals)  # exp(-s xi) undoes exp(s xi)
-    return _screw(xi_new, s, p, n)
+    p, n = _screw(-twist_of(old_motion), s, points, normals)  # exp(-s xi) undoes exp(s xi)
+    return _screw(twist_of(new_motion), s, p, n)
+
+
+def twist_of(motion: np.ndarray) -> np.ndarray:
+    """(6,) the twist of a (4, 4) motion (``se3.log``), or the (6,) twist given."""
+    motion = np.asarray(motion, dtype=np.float64)
+    return motion if motion.shape == (6,) else se3.log(motion)

@@ -42,7 +42,7 @@ from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times
 
 from .cold_start import choose_start
 from .config import OdometryConfig
-from .deskew import deskew, redeskew
+from .deskew import deskew, redeskew, twist_of
 from .filters import FilteredScan, filter_scan, scan_normals_needed
 from .gcr import correct_kitti_vertical_angle, gcr_threshold_m, ring_of_points
 from .icp import RegistrationResult, Source, Target, match, register, rejectors_for
@@ -250,8 +250,10 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
     The centroids (what a map takes) move with the points when they are the points. Otherwise
     they move only when ``centroids_motion`` (4, 4), the motion they are de-skewed with now, is
     given: the de-skew refinements leave them, since only the frame's final motion matters to the map.
+    Motions are (4, 4) transforms or their (6,) twists (``deskew.redeskew``).
     """
     same = scan.points is scan.centroids  # (the ICP points are the centroids: move them once)
+    old_motion, new_motion = twist_of(old_motion), twist_of(new_motion)  # (once for every array moved)
     # (a scan registered against a map has no normals of its own: nan rows, which stay nan)
     without_normals = len(scan.normals) > 0 and bool(np.isnan(scan.normals[:, 0]).all())
     scan.points, normals = redeskew(scan.points, None if without_normals else scan.normals, scan.times_s,
@@ -561,6 +563,7 @@ class Odometry:
         T_init = T_target_prev @ T_guess
         runs: list[RegistrationResult] = []  # (every registration run: their time and iterations count)
         T_deskew = T_guess  # the motion the scan is de-skewed with now
+        xi_deskew = se3.log(T_deskew)  # (its twist, kept beside it: the re-de-skews take it)
 
         def motion_of(T_target_cur: np.ndarray) -> np.ndarray:
             return T_target_cur if previous_is_target else se3.inverse(T_target_prev) @ T_target_cur
@@ -584,9 +587,11 @@ class Odometry:
                 # (the damped update of the refinements below, at every step: the de-skew motion moves
                 # halfway towards the estimate's, and the step and that move must both be small to stop)
                 def reskew(T_target_cur: np.ndarray) -> np.ndarray:
-                    nonlocal T_deskew
-                    old, T_deskew = T_deskew, se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion_of(T_target_cur))))
-                    redeskew_scan(scan, old, T_deskew, period)
+                    nonlocal T_deskew, xi_deskew
+                    old, xi_old = T_deskew, xi_deskew
+                    T_deskew = se3.exp(0.5 * (xi_old + se3.log(motion_of(T_target_cur))))
+                    xi_deskew = se3.log(T_deskew)
+                    redeskew_scan(scan, xi_old, xi_deskew, period)
                     source.points = scan.points
                     source.poles = None if scan.poles is None else scan.poles.points
                     return se3.log(se3.inverse(old) @ T_deskew)
@@ -619,9 +624,10 @@ class Odometry:
                     st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points))
                 target = self._cold_start_target(first_kind)
             else:
-                M = se3.exp(0.5 * (se3.log(T_deskew) + se3.log(motion)))
-            redeskew_scan(scan, T_deskew, M, period)
-            T_deskew = M
+                M = se3.exp(0.5 * (xi_deskew + se3.log(motion)))
+            xi_M = se3.log(M)
+            redeskew_scan(scan, xi_deskew, xi_M, period)
+            T_deskew, xi_deskew = M, xi_M
             # The GCR thresholds scale with range and incidence, which a re-de-skew by a
             # few centimetres does not change: they are reused. (The poles were re-de-skewed too.)
             source = Source(scan.points, scan.normals, source.gcr_threshold_m,
