@@ -15,6 +15,11 @@ import numpy as np
 from pykdtree.kdtree import KDTree as _PyKDTree
 
 
+# Points per leaf: 32 builds a 50k-point map's tree in 2.5 ms where pykdtree's default 16 takes 3.2,
+# and answers its two-nearest and twelve-nearest queries as fast (measured on the benchmark's maps).
+LEAF_SIZE = 32
+
+
 class KDTree:
     """A k-d tree over (N, 3) points, m.
 
@@ -27,7 +32,7 @@ class KDTree:
         self.data = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         self.n = len(self.data)
         # (pykdtree cannot hold no points)
-        self._tree = _PyKDTree(self.data) if self.n else None
+        self._tree = _PyKDTree(self.data, leafsize=LEAF_SIZE) if self.n else None
 
     def query(self, points: np.ndarray, k: int = 1,
               distance_upper_bound: float = np.inf) -> tuple[np.ndarray, np.ndarray]:

@@ -218,16 +218,19 @@ class LocalMap:
             raise ValueError("this map carries a payload: give one with every update")
         if nearest_m is not None and np.shape(nearest_m) != (len(points_world),):
             raise ValueError(f"nearest_m must be ({len(points_world)},), got {np.shape(nearest_m)}")
-        added = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload, nearest_m)
+        inserted = self._insert(points_world, np.asarray(sensor_position_m, dtype=float), payload, nearest_m)
         dropped = self._prune(np.asarray(sensor_position_m, dtype=np.float64))
-        # (built on the background thread while the next scan is cleaned and filtered)
+        # (built on the background thread while the cached normals are checked and the next scan
+        # is cleaned and filtered)
         self._tree = background("map").submit(KDTree, self.points)
-        return MapStats(len(self.points), len(self._voxel_keys), added, dropped)
+        self._forget_normals_near(np.concatenate([inserted, dropped]))
+        return MapStats(len(self.points), len(self._voxel_keys), len(inserted), len(dropped))
 
     def _insert(self, points: np.ndarray, origin: np.ndarray, payload: np.ndarray | None = None,
-                nearest_m: np.ndarray | None = None) -> int:
+                nearest_m: np.ndarray | None = None) -> np.ndarray:
+        """Append the points the spacing check and the voxel caps accept; returns them (K, 3), m."""
         if len(points) == 0:
-            return 0
+            return points
         if self.min_spacing_m > 0 and len(self.points):
             # (the points of one update are a scan's voxel centroids, already spaced by its voxel grid)
             if nearest_m is None:
@@ -237,7 +240,7 @@ class LocalMap:
             if payload is not None:
                 payload = payload[new]
             if len(points) == 0:
-                return 0
+                return points
         keys = voxel_keys(points, self.voxel_size_m)
         order = np.argsort(keys, kind="stable")
         keys, points = keys[order], points.take(order, axis=0)
@@ -251,7 +254,7 @@ class LocalMap:
         held[known] = self._voxel_counts[pos[known]]
         accept = held + rank_within_groups(keys) < self.max_points_per_voxel
         if not accept.any():
-            return 0
+            return points[:0]
         keys, points = keys[accept], np.compress(accept, points, axis=0)
         if payload is not None:
             self._payload = np.concatenate([self._payload, payload[accept]])
@@ -263,28 +266,27 @@ class LocalMap:
         self._elevations = np.concatenate([self._elevations, beam_elevation_rad(beams)])
         self._origins = np.concatenate([self._origins, np.broadcast_to(origin, points.shape)])
         self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
-        self._forget_normals_near(points)
         self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
         self._reach = np.concatenate([self._reach, np.zeros(len(points))])
         self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
         self._recount(np.concatenate([self._voxel_keys, keys]),
                       np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
-        return int(len(keys))
+        return points
 
-    def _prune(self, position: np.ndarray) -> int:
+    def _prune(self, position: np.ndarray) -> np.ndarray:
         """Drop the voxels whose centre is farther than ``max_distance_m`` (a check per voxel, not per point).
 
         Checked once the sensor has moved ``prune_stride_m`` since the last check: a map a few
         metres wider than ``max_distance_m`` for a moment costs nothing, rebuilding every array
-        of the map each frame does.
+        of the map each frame does. Returns the (K, 3) points dropped, m.
         """
         if self._pruned_at is not None and np.linalg.norm(position - self._pruned_at) < self.prune_stride_m:
-            return 0
+            return self.points[:0]
         self._pruned_at = position.copy()
         d = voxel_centres(self._voxel_keys, self.voxel_size_m) - position
         far = np.einsum("ij,ij->i", d, d) > self.max_distance_m**2
         if not far.any():
-            return 0
+            return self.points[:0]
         drop = in_sorted(self._keys, self._voxel_keys[far])
         dropped_points = np.compress(drop, self.points, axis=0)
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
@@ -295,16 +297,14 @@ class LocalMap:
             a.take(kept, axis=0) for a in (self._normals, self._known, self._uncertain, self._reach))
         if self._payload is not None:
             self._payload = self._payload.take(kept)
-        # (after the arrays shrink: rows of ``_known`` are rows of the kept points)
-        self._forget_normals_near(dropped_points)
-        return int(drop.sum())
+        return dropped_points
 
     def _forget_normals_near(self, changed: np.ndarray) -> None:
         """Forget the cached normals whose neighbourhood ``changed`` (K, 3) points entered or left, m.
 
         A point's k nearest neighbours change exactly when a point arrives closer than the
-        farthest of them, or one of them goes; both are within that reach. Called before the
-        rows of new points are appended (they have no cached normal yet), after dropped ones go.
+        farthest of them, or one of them goes; both are within that reach. Called once the arrays
+        changed: the rows of new points have no cached normal yet, dropped ones are gone.
         """
         rows = np.flatnonzero(self._known)
         if len(rows) == 0 or len(changed) == 0:
