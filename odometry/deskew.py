@@ -14,7 +14,7 @@ import numpy as np
 
 from simlidar import se3
 
-from .kernels import screw_motion
+from .kernels import rescrew_motion, screw_motion
 
 
 def screw_apply(xi: np.ndarray, s: np.ndarray, points: np.ndarray, rotate_only: bool = False) -> np.ndarray:
@@ -85,9 +85,14 @@ def redeskew(points: np.ndarray, normals: np.ndarray | None, times_s: np.ndarray
     The motions are (4, 4) transforms or their (6,) twists (``se3.log``: a caller moving
     several arrays by the same motions takes the logarithms once).
     """
-    s = np.asarray(times_s) / frame_period_s
-    p, n = _screw(-twist_of(old_motion), s, points, normals)  # exp(-s xi) undoes exp(s xi)
-    return _screw(twist_of(new_motion), s, p, n)
+    points = _rows(points)
+    if normals is not None and np.shape(normals) != points.shape:
+        raise ValueError(f"normals must be shaped as the points {points.shape}, got {np.shape(normals)}")
+    s = np.ascontiguousarray(np.broadcast_to(np.asarray(times_s, dtype=np.float64) / frame_period_s, (len(points),)))
+    # (exp(-s xi_old) undoes the old de-skew, exp(s xi_new) does the new one: one compiled pass)
+    p, n = rescrew_motion(twist_of(old_motion), twist_of(new_motion), s, points,
+                          _NO_ROWS if normals is None else _rows(normals))
+    return p, None if normals is None else n
 
 
 def twist_of(motion: np.ndarray) -> np.ndarray:

@@ -185,6 +185,41 @@ def neighbourhood_scatter(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, S
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _screw_terms(xi: np.ndarray) -> tuple:
+    """The per-twist constants of ``screw_motion``: (rho, |omega|, k = omega / |omega|, k x rho, k x (k x rho))."""
+    rx, ry, rz = xi[0], xi[1], xi[2]
+    theta = math.sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5])
+    if theta < 1e-12:
+        return rx, ry, rz, theta, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    kx, ky, kz = xi[3] / theta, xi[4] / theta, xi[5] / theta
+    ux, uy, uz = ky * rz - kz * ry, kz * rx - kx * rz, kx * ry - ky * rx
+    vx, vy, vz = ky * uz - kz * uy, kz * ux - kx * uz, kx * uy - ky * ux
+    return rx, ry, rz, theta, kx, ky, kz, ux, uy, uz, vx, vy, vz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _screw_one(t: tuple, si: float, x: float, y: float, z: float, nx: float, ny: float, nz: float
+               ) -> tuple[float, float, float, float, float, float]:
+    """``exp(si xi)`` of one point (x, y, z) and its rotation of one normal (nx, ny, nz), xi's terms ``t``."""
+    rx, ry, rz, theta, kx, ky, kz, ux, uy, uz, vx, vy, vz = t
+    if theta < 1e-12:
+        return x + si * rx, y + si * ry, z + si * rz, nx, ny, nz
+    phi = si * theta
+    c, sn = math.cos(phi), math.sin(phi)
+    w = (kx * x + ky * y + kz * z) * (1.0 - c)
+    if abs(phi) < 1e-6:
+        a, b = si * phi / 2.0, si * phi * phi / 6.0
+    else:
+        a, b = si * (1.0 - c) / phi, si * (phi - sn) / phi
+    px = c * x + sn * (ky * z - kz * y) + w * kx + (si * rx + a * ux + b * vx)
+    py = c * y + sn * (kz * x - kx * z) + w * ky + (si * ry + a * uy + b * vy)
+    pz = c * z + sn * (kx * y - ky * x) + w * kz + (si * rz + a * uz + b * vz)
+    w = (kx * nx + ky * ny + kz * nz) * (1.0 - c)
+    return (px, py, pz, c * nx + sn * (ky * nz - kz * ny) + w * kx, c * ny + sn * (kz * nx - kx * nz) + w * ky,
+            c * nz + sn * (kx * ny - ky * nx) + w * kz)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def screw_motion(xi: np.ndarray, s: np.ndarray, points: np.ndarray, normals: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -196,39 +231,33 @@ def screw_motion(xi: np.ndarray, s: np.ndarray, points: np.ndarray, normals: np.
     translation ``s rho + s (1 - cos phi) / phi (k x rho) + s (phi - sin phi) / phi k x (k x rho)``
     (its series below |phi| = 1e-6). ``odometry.deskew.screw_apply`` is the caller.
     """
-    rx, ry, rz = xi[0], xi[1], xi[2]
-    theta = math.sqrt(xi[3] * xi[3] + xi[4] * xi[4] + xi[5] * xi[5])
+    return rescrew_motion(np.zeros(6), xi, s, points, normals)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def rescrew_motion(xi_old: np.ndarray, xi_new: np.ndarray, s: np.ndarray, points: np.ndarray, normals: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """``screw_motion(xi_new, s, *screw_motion(-xi_old, s, points, normals))`` in one pass: points (and
+    normals) de-skewed with the twist ``xi_old`` as ``xi_new`` would have de-skewed them
+    (``odometry.deskew.redeskew``). A zero ``xi_old`` moves nothing: ``screw_motion``."""
+    undo = _screw_terms(-xi_old)
+    redo = _screw_terms(xi_new)
+    skip_undo = xi_old[0] == 0.0 and xi_old[1] == 0.0 and xi_old[2] == 0.0 and undo[3] < 1e-12
+    with_normals = normals.shape[0] > 0
     out_p = np.empty_like(points)
     out_n = np.empty_like(normals)
-    if theta < 1e-12:
-        for i in range(points.shape[0]):
-            out_p[i, 0], out_p[i, 1], out_p[i, 2] = points[i, 0] + s[i] * rx, points[i, 1] + s[i] * ry, \
-                points[i, 2] + s[i] * rz
-        out_n[:] = normals
-        return out_p, out_n
-    kx, ky, kz = xi[3] / theta, xi[4] / theta, xi[5] / theta
-    # k x rho and k x (k x rho)
-    ux, uy, uz = ky * rz - kz * ry, kz * rx - kx * rz, kx * ry - ky * rx
-    vx, vy, vz = ky * uz - kz * uy, kz * ux - kx * uz, kx * uy - ky * ux
     for i in range(points.shape[0]):
         si = s[i]
-        phi = si * theta
-        c, sn = math.cos(phi), math.sin(phi)
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        w = (kx * x + ky * y + kz * z) * (1.0 - c)
-        if abs(phi) < 1e-6:
-            a, b = si * phi / 2.0, si * phi * phi / 6.0
-        else:
-            a, b = si * (1.0 - c) / phi, si * (phi - sn) / phi
-        out_p[i, 0] = c * x + sn * (ky * z - kz * y) + w * kx + (si * rx + a * ux + b * vx)
-        out_p[i, 1] = c * y + sn * (kz * x - kx * z) + w * ky + (si * ry + a * uy + b * vy)
-        out_p[i, 2] = c * z + sn * (kx * y - ky * x) + w * kz + (si * rz + a * uz + b * vz)
-        if normals.shape[0]:
-            x, y, z = normals[i, 0], normals[i, 1], normals[i, 2]
-            w = (kx * x + ky * y + kz * z) * (1.0 - c)
-            out_n[i, 0] = c * x + sn * (ky * z - kz * y) + w * kx
-            out_n[i, 1] = c * y + sn * (kz * x - kx * z) + w * ky
-            out_n[i, 2] = c * z + sn * (kx * y - ky * x) + w * kz
+        nx = ny = nz = 0.0
+        if with_normals:
+            nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        if not skip_undo:
+            x, y, z, nx, ny, nz = _screw_one(undo, si, x, y, z, nx, ny, nz)
+        x, y, z, nx, ny, nz = _screw_one(redo, si, x, y, z, nx, ny, nz)
+        out_p[i, 0], out_p[i, 1], out_p[i, 2] = x, y, z
+        if with_normals:
+            out_n[i, 0], out_n[i, 1], out_n[i, 2] = nx, ny, nz
     return out_p, out_n
 
 

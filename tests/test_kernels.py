@@ -277,3 +277,22 @@ def test_gathered_scatter_and_map_normal_verdicts_are_the_map_normals_numpy_expr
     np.testing.assert_array_equal(variance, nc.max_variance_rad2)
     keep = ncf_keep(variance, c_tau)
     assert 0.05 < keep.mean() < 0.95
+
+
+def test_rescrew_motion_is_undoing_one_screw_then_doing_another():
+    rng = np.random.default_rng(11)
+    p = rng.uniform(-50, 50, size=(400, 3))
+    n = unit_rows(rng, 400)
+    s = rng.uniform(0, 1, 400)
+    xi_old = np.array([0.9, 0.05, 0.01, 0.002, -0.001, 0.03])
+    xi_new = np.array([1.1, -0.02, 0.0, 0.0, 0.001, 0.025])
+    p1, n1 = kernels.screw_motion(-xi_old, s, p, n)
+    p2, n2 = kernels.screw_motion(xi_new, s, p1, n1)
+    p3, n3 = kernels.rescrew_motion(xi_old, xi_new, s, p, n)
+    np.testing.assert_array_equal(p3, p2)
+    np.testing.assert_array_equal(n3, n2)
+    # a zero old twist undoes nothing; a pure translation moves by s rho
+    np.testing.assert_array_equal(kernels.rescrew_motion(np.zeros(6), xi_new, s, p, n)[0],
+                                  kernels.screw_motion(xi_new, s, p, n)[0])
+    shift = np.array([1.0, 2.0, 3.0, 0, 0, 0])
+    np.testing.assert_allclose(kernels.rescrew_motion(np.zeros(6), shift, s, p, p[:0])[0], p + s[:, None] * shift[:3])
