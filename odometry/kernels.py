@@ -156,32 +156,48 @@ def eigh3_closed_form(A: np.ndarray, min_rel_gap: float) -> tuple[np.ndarray, np
     return w, V, unsure
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _mean_and_scatter(points: np.ndarray, rows: np.ndarray) -> tuple:
+    """(mean x, y, z, then the scatter's xx, xy, xz, yy, yz, zz) of the (k,) ``rows`` of (N, 3) ``points``."""
+    k = rows.shape[0]
+    mx = my = mz = 0.0
+    for j in range(k):
+        r = rows[j]
+        mx += points[r, 0]
+        my += points[r, 1]
+        mz += points[r, 2]
+    mx, my, mz = mx / k, my / k, mz / k
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for j in range(k):
+        r = rows[j]
+        dx, dy, dz = points[r, 0] - mx, points[r, 1] - my, points[r, 2] - mz
+        sxx += dx * dx
+        sxy += dx * dy
+        sxz += dx * dz
+        syy += dy * dy
+        syz += dy * dz
+        szz += dz * dz
+    return mx, my, mz, sxx, sxy, sxz, syy, syz, szz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_mean_and_scatter(mean: np.ndarray, S: np.ndarray, i: int, t: tuple) -> None:
+    mx, my, mz, sxx, sxy, sxz, syy, syz, szz = t
+    mean[i, 0], mean[i, 1], mean[i, 2] = mx, my, mz
+    S[i, 0, 0], S[i, 0, 1], S[i, 0, 2] = sxx, sxy, sxz
+    S[i, 1, 0], S[i, 1, 1], S[i, 1, 2] = sxy, syy, syz
+    S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = sxz, syz, szz
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def neighbourhood_scatter(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((M, 3) mean, (M, 3, 3) scatter ``D^T D``) of (M, k, 3) neighbourhoods, D = P - mean (m, m^2)."""
     m, k = P.shape[0], P.shape[1]
     mean = np.empty((m, 3))
     S = np.empty((m, 3, 3))
+    every = np.arange(k)
     for i in range(m):
-        mx = my = mz = 0.0
-        for j in range(k):
-            mx += P[i, j, 0]
-            my += P[i, j, 1]
-            mz += P[i, j, 2]
-        mx, my, mz = mx / k, my / k, mz / k
-        sxx = sxy = sxz = syy = syz = szz = 0.0
-        for j in range(k):
-            dx, dy, dz = P[i, j, 0] - mx, P[i, j, 1] - my, P[i, j, 2] - mz
-            sxx += dx * dx
-            sxy += dx * dy
-            sxz += dx * dz
-            syy += dy * dy
-            syz += dy * dz
-            szz += dz * dz
-        mean[i, 0], mean[i, 1], mean[i, 2] = mx, my, mz
-        S[i, 0, 0], S[i, 0, 1], S[i, 0, 2] = sxx, sxy, sxz
-        S[i, 1, 0], S[i, 1, 1], S[i, 1, 2] = sxy, syy, syz
-        S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = sxz, syz, szz
+        _store_mean_and_scatter(mean, S, i, _mean_and_scatter(P[i], every))
     return mean, S
 
 
@@ -389,6 +405,27 @@ def _in_axes(V: np.ndarray, i: int, x: float, y: float, z: float) -> tuple[float
             x * V[i, 0, 2] + y * V[i, 1, 2] + z * V[i, 2, 2])
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _beam_moments(points: np.ndarray, beams: np.ndarray, rows: np.ndarray, mean: np.ndarray, V: np.ndarray,
+                  i: int) -> tuple[float, float, float, float, float, float]:
+    """``beam_noise_moments``' sums for neighbourhood i, its neighbours the ``rows`` of ``points`` and ``beams``:
+    (sum z_0^2, sum z_0 z_1, sum z_1^2, sum c_0^2, sum c_1^2, sum c_2^2)."""
+    s00 = s01 = s11 = q0 = q1 = q2 = 0.0
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        dx, dy, dz = points[r, 0] - mean[i, 0], points[r, 1] - mean[i, 1], points[r, 2] - mean[i, 2]
+        a0, a1, h = _in_axes(V, i, dx, dy, dz)
+        c0, c1, c2 = _in_axes(V, i, beams[r, 0], beams[r, 1], beams[r, 2])
+        z0, z1 = h * c0 + a0 * c2, h * c1 + a1 * c2
+        s00 += z0 * z0
+        s01 += z0 * z1
+        s11 += z1 * z1
+        q0 += c0 * c0
+        q1 += c1 * c1
+        q2 += c2 * c2
+    return s00, s01, s11, q0, q1, q2
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def beam_noise_moments(P: np.ndarray, mean: np.ndarray, V: np.ndarray, beams: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -402,20 +439,9 @@ def beam_noise_moments(P: np.ndarray, mean: np.ndarray, V: np.ndarray, beams: np
     m, k = P.shape[0], P.shape[1]
     zz = np.empty((m, 2, 2))
     cc = np.empty((m, 3))
+    every = np.arange(k)
     for i in range(m):
-        s00 = s01 = s11 = q0 = q1 = q2 = 0.0
-        for j in range(k):
-            dx, dy, dz = P[i, j, 0] - mean[i, 0], P[i, j, 1] - mean[i, 1], P[i, j, 2] - mean[i, 2]
-            bx, by, bz = beams[i, j, 0], beams[i, j, 1], beams[i, j, 2]
-            a0, a1, h = _in_axes(V, i, dx, dy, dz)
-            c0, c1, c2 = _in_axes(V, i, bx, by, bz)
-            z0, z1 = h * c0 + a0 * c2, h * c1 + a1 * c2
-            s00 += z0 * z0
-            s01 += z0 * z1
-            s11 += z1 * z1
-            q0 += c0 * c0
-            q1 += c1 * c1
-            q2 += c2 * c2
+        s00, s01, s11, q0, q1, q2 = _beam_moments(P[i], beams[i], every, mean, V, i)
         zz[i, 0, 0], zz[i, 0, 1], zz[i, 1, 0], zz[i, 1, 1] = s00, s01, s01, s11
         cc[i, 0], cc[i, 1], cc[i, 2] = q0, q1, q2
     return zz, cc
@@ -666,27 +692,7 @@ def gathered_scatter(points: np.ndarray, neighbours: np.ndarray, at: np.ndarray
     S = np.empty((m, 3, 3))
     reach = np.empty(m)
     for i in range(m):
-        mx = my = mz = 0.0
-        for j in range(k):
-            r = neighbours[i, j]
-            mx += points[r, 0]
-            my += points[r, 1]
-            mz += points[r, 2]
-        mx, my, mz = mx / k, my / k, mz / k
-        sxx = sxy = sxz = syy = syz = szz = 0.0
-        for j in range(k):
-            r = neighbours[i, j]
-            dx, dy, dz = points[r, 0] - mx, points[r, 1] - my, points[r, 2] - mz
-            sxx += dx * dx
-            sxy += dx * dy
-            sxz += dx * dz
-            syy += dy * dy
-            syz += dy * dz
-            szz += dz * dz
-        mean[i, 0], mean[i, 1], mean[i, 2] = mx, my, mz
-        S[i, 0, 0], S[i, 0, 1], S[i, 0, 2] = sxx, sxy, sxz
-        S[i, 1, 0], S[i, 1, 1], S[i, 1, 2] = sxy, syy, syz
-        S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = sxz, syz, szz
+        _store_mean_and_scatter(mean, S, i, _mean_and_scatter(points, neighbours[i]))
         far = neighbours[i, k - 1]
         dx, dy, dz = points[far, 0] - at[i, 0], points[far, 1] - at[i, 1], points[far, 2] - at[i, 2]
         reach[i] = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -747,19 +753,7 @@ def map_normal_verdicts(points: np.ndarray, beams: np.ndarray, elevations: np.nd
         for a in range(3):
             normals[i, a] = V[i, a, 2] if ok else np.nan
         # the NCF (``beam_noise_moments``, the debiased gaps, the 2 x 2 covariance's major eigenvalue)
-        s00 = s01 = s11 = q0 = q1 = q2 = 0.0
-        for j in range(k):
-            r = neighbours[i, j]
-            dx, dy, dz = points[r, 0] - mean[i, 0], points[r, 1] - mean[i, 1], points[r, 2] - mean[i, 2]
-            a0, a1, h = _in_axes(V, i, dx, dy, dz)
-            c0, c1, c2 = _in_axes(V, i, beams[r, 0], beams[r, 1], beams[r, 2])
-            z0, z1 = h * c0 + a0 * c2, h * c1 + a1 * c2
-            s00 += z0 * z0
-            s01 += z0 * z1
-            s11 += z1 * z1
-            q0 += c0 * c0
-            q1 += c1 * c1
-            q2 += c2 * c2
+        s00, s01, s11, q0, q1, q2 = _beam_moments(points, beams, neighbours[i], mean, V, i)
         tol = degenerate_gap * l0
         g0, g1 = l0 - l2, l1 - l2
         bad = not (g1 > tol) or not (g0 > tol) or not math.isfinite(l0)
