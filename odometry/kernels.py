@@ -358,6 +358,27 @@ def voxel_sums(slot: np.ndarray, k: int, points: np.ndarray, values: np.ndarray
     return sums, value_sums, counts
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _table_shift(entries: int) -> tuple[int, np.uint64]:
+    """(size, shift) of an open-addressing hash table for ``entries`` keys: a power of two at least
+    twice as many slots (short probe runs), and the shift that maps a 64-bit hash onto them."""
+    size = 2
+    while size < 2 * entries:
+        size *= 2
+    return size, np.uint64(64 - max(int(np.log2(size)), 1))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _probe(table_key: np.ndarray, table_id: np.ndarray, key: np.int64, shift: np.uint64) -> int:
+    """The slot of ``key`` in an open-addressing table (Fibonacci hashing, linear probing), or the
+    free slot (``table_id < 0``) where it goes."""
+    mask = table_key.shape[0] - 1
+    h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+    while table_id[h] >= 0 and table_key[h] != key:
+        h = (h + 1) & mask
+    return h
+
+
 @njit(cache=True, nogil=True)
 def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((K,) the distinct keys ascending, (N,) the slot of each key among them):
@@ -367,10 +388,7 @@ def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (a scan has several points per voxel: sorting the N keys took most of a voxel grid's time).
     """
     n = keys.shape[0]
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    shift = np.uint64(64 - max(int(np.log2(size)), 1))
+    size, shift = _table_shift(n)
     table_key = np.empty(size, dtype=np.int64)
     table_id = np.full(size, -1, dtype=np.int64)
     first = np.empty(n, dtype=np.int64)  # the distinct keys, in order of first appearance
@@ -378,9 +396,7 @@ def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     k = 0
     for r in range(n):
         key = keys[r]
-        h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
-        while table_id[h] >= 0 and table_key[h] != key:
-            h = (h + 1) & (size - 1)
+        h = _probe(table_key, table_id, key, shift)
         if table_id[h] < 0:
             table_key[h] = key
             table_id[h] = k
@@ -395,6 +411,73 @@ def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for r in range(n):
         slot[r] = rank[provisional[r]]
     return first[:k][order], slot
+
+
+@njit(cache=True, nogil=True)
+def keys_near(keys: np.ndarray, around: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """(M,) bool: which of (M,) int64 voxel keys lie within ``steps`` of one of the (K,) keys ``around``:
+    ``numpy.isin(keys, numpy.unique(around[:, None] + steps))`` (steps: (S,) key differences, e.g. a
+    voxel's 27 neighbours, ``odometry.voxels.neighbour_key_steps``), by a hash set of the K x S keys."""
+    size, shift = _table_shift(around.shape[0] * steps.shape[0])
+    table_key = np.empty(size, dtype=np.int64)
+    table_id = np.full(size, -1, dtype=np.int64)
+    for a in range(around.shape[0]):
+        for s in range(steps.shape[0]):
+            key = around[a] + steps[s]
+            h = _probe(table_key, table_id, key, shift)
+            table_key[h] = key
+            table_id[h] = 0
+    near = np.empty(keys.shape[0], dtype=np.bool_)
+    for r in range(keys.shape[0]):
+        near[r] = table_id[_probe(table_key, table_id, keys[r], shift)] >= 0
+    return near
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def within_reach_of_any(points: np.ndarray, keys: np.ndarray, reach_m: np.ndarray, others: np.ndarray,
+                        other_keys: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """(M,) bool: one of the (K, 3) ``others`` lies within ``reach_m`` (M,) of each (M, 3) point, m.
+
+    Only the others in the voxels ``keys + steps`` are looked at (keys: (M,) and other_keys: (K,) the
+    int64 voxel keys of both; steps: (S,) key differences): with a voxel and its 26 neighbours, the
+    answer is exact for reaches up to the voxel's edge, ``k-d tree distance to the nearest other <= reach``
+    (distances as ``sqrt((dx^2 + dy^2) + dz^2)``, as the k-d tree computes them).
+    """
+    distinct, slot = group_keys(other_keys)
+    g = distinct.shape[0]
+    start = np.zeros(g + 1, dtype=np.int64)  # the others of voxel v: order[start[v]:start[v + 1]]
+    for c in range(slot.shape[0]):
+        start[slot[c] + 1] += 1
+    for v in range(g):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    order = np.empty(slot.shape[0], dtype=np.int64)
+    for c in range(slot.shape[0]):
+        order[fill[slot[c]]] = c
+        fill[slot[c]] += 1
+    size, shift = _table_shift(g)
+    table_key = np.empty(size, dtype=np.int64)
+    table_id = np.full(size, -1, dtype=np.int64)
+    for v in range(g):
+        h = _probe(table_key, table_id, distinct[v], shift)
+        table_key[h] = distinct[v]
+        table_id[h] = v
+    found = np.zeros(points.shape[0], dtype=np.bool_)
+    for i in range(points.shape[0]):
+        x, y, z, r = points[i, 0], points[i, 1], points[i, 2], reach_m[i]
+        for s in range(steps.shape[0]):
+            v = table_id[_probe(table_key, table_id, keys[i] + steps[s], shift)]
+            if v < 0:
+                continue
+            for j in range(start[v], start[v + 1]):
+                c = order[j]
+                dx, dy, dz = x - others[c, 0], y - others[c, 1], z - others[c, 2]
+                if math.sqrt((dx * dx + dy * dy) + dz * dz) <= r:
+                    found[i] = True
+                    break
+            if found[i]:
+                break
+    return found
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -35,7 +35,7 @@ import numpy as np
 from .filters import background
 from .icp import Target
 from .kdtree import KDTree
-from .kernels import gathered_scatter, map_normal_verdicts
+from .kernels import gathered_scatter, keys_near, map_normal_verdicts, within_reach_of_any
 from .ncf import DEFAULT_GAP_SIGNIFICANCE_Z, DEGENERATE_GAP, ncf_keep
 from .normals import knn, symmetric_eigh_descending
 from .voxels import neighbour_key_steps, voxel_centres, voxel_keys
@@ -311,16 +311,22 @@ class LocalMap:
             return
         # (with a margin for rounding: the farthest neighbour itself may be the one that left)
         reach = self._reach[rows] * (1 + 1e-9)
-        # A row reaching less than a voxel's edge can meet a changed point only if that point lies
-        # in its voxel or one of the 26 around it: only those rows, and the farther-reaching (about
-        # half of them in a city), are searched; the search, not this selection, is the cost.
-        around = np.unique(np.unique(voxel_keys(changed, self.voxel_size_m))[:, None] + _NEIGHBOUR_KEY_STEPS)
-        search = (reach > self.voxel_size_m) | in_sorted(self._keys.take(rows), around)
-        rows, reach = rows[search], reach[search]
-        if len(rows) == 0:
-            return
-        d, _ = KDTree(changed).query(self.points.take(rows, axis=0), k=1, distance_upper_bound=float(reach.max()))
-        self._known[rows[d <= reach]] = False
+        changed_keys = voxel_keys(changed, self.voxel_size_m)
+        # A row reaching at most a voxel's edge can meet a changed point only in its voxel or one of the
+        # 26 around it: those rows are checked against the changed points there (compiled, most rows
+        # have no changed voxel around them); the farther-reaching (about a tenth in a city) are searched.
+        short = reach <= self.voxel_size_m
+        near = short & keys_near(self._keys.take(rows), changed_keys, _NEIGHBOUR_KEY_STEPS)
+        forget = np.zeros(len(rows), dtype=bool)
+        at = np.flatnonzero(near)
+        forget[at] = within_reach_of_any(self.points.take(rows[at], axis=0), self._keys.take(rows[at]), reach[at],
+                                         changed, changed_keys, _NEIGHBOUR_KEY_STEPS)
+        far = np.flatnonzero(~short)
+        if len(far):
+            d, _ = KDTree(changed).query(self.points.take(rows[far], axis=0), k=1,
+                                         distance_upper_bound=float(reach[far].max()))
+            forget[far] = d <= reach[far]
+        self._known[rows[forget]] = False
 
     def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
         """Occupied voxels and their counts from (key, count change) pairs."""

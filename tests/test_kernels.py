@@ -125,6 +125,26 @@ def test_voxel_keys_and_grouping_agree_with_numpy():
         assert not kernels.packed_voxel_keys(q, 0.35, 21)[1]
 
 
+def test_keys_near_and_within_reach_agree_with_numpy_and_a_kd_tree():
+    from odometry.voxels import neighbour_key_steps, voxel_keys
+
+    rng = np.random.default_rng(6)
+    points = rng.uniform(-30, 30, size=(6000, 3))
+    changed = np.vstack([rng.uniform(-30, 30, size=(300, 3)), points[:50] + rng.normal(scale=0.2, size=(50, 3))])
+    keys, changed_keys, steps = voxel_keys(points, 1.0), voxel_keys(changed, 1.0), neighbour_key_steps()
+    near = kernels.keys_near(keys, changed_keys, steps)
+    np.testing.assert_array_equal(near, np.isin(keys, np.unique(changed_keys[:, None] + steps)))
+    assert 0 < near.sum() < len(keys)
+    assert not kernels.keys_near(keys, changed_keys[:0], steps).any()
+    # within a voxel's edge: the nearest changed point by a k-d tree decides
+    reach = rng.uniform(0.05, 1.0, size=len(points))
+    found = kernels.within_reach_of_any(points, keys, reach, changed, changed_keys, steps)
+    d, _ = cKDTree(changed).query(points)
+    np.testing.assert_array_equal(found, d <= reach)
+    assert 0 < found.sum() < len(points)
+    assert not kernels.within_reach_of_any(points, keys, reach, changed[:0], changed_keys[:0], steps).any()
+
+
 def pca_of(P):
     """(mean (M, 3), V (M, 3, 3)) of neighbourhoods by numpy's SVD."""
     mean = P.mean(axis=1)
