@@ -178,6 +178,7 @@ class LocalMap:
         self._voxel_counts = np.zeros(0, dtype=np.int64)
         # Optional (N,) values carried with the points (``update``'s payload), None when not used.
         self._payload: np.ndarray | None = None
+        self._buffers: dict[str, np.ndarray] = {}  # (the per-point arrays' room to grow: ``_append``)
         self._tree = background("map").submit(KDTree, self.points)
 
     def __len__(self) -> int:
@@ -257,21 +258,34 @@ class LocalMap:
             return points[:0]
         keys, points = keys[accept], np.compress(accept, points, axis=0)
         if payload is not None:
-            self._payload = np.concatenate([self._payload, payload[accept]])
-        self.points = np.concatenate([self.points, points])
-        self._keys = np.concatenate([self._keys, keys])
+            self._append("_payload", payload[accept])
         beams = points - origin
         beams /= np.linalg.norm(beams, axis=1, keepdims=True)
-        self._beams = np.concatenate([self._beams, beams])
-        self._elevations = np.concatenate([self._elevations, beam_elevation_rad(beams)])
-        self._origins = np.concatenate([self._origins, np.broadcast_to(origin, points.shape)])
-        self._normals = np.concatenate([self._normals, np.full(points.shape, np.nan)])
-        self._known = np.concatenate([self._known, np.zeros(len(points), dtype=bool)])
-        self._reach = np.concatenate([self._reach, np.zeros(len(points))])
-        self._uncertain = np.concatenate([self._uncertain, np.zeros(len(points), dtype=bool)])
-        self._recount(np.concatenate([self._voxel_keys, keys]),
-                      np.concatenate([self._voxel_counts, np.ones(len(keys), dtype=np.int64)]))
+        for name, rows in (("points", points), ("_keys", keys), ("_beams", beams),
+                           ("_elevations", beam_elevation_rad(beams)), ("_origins", origin),
+                           ("_normals", np.nan), ("_known", False), ("_reach", 0.0), ("_uncertain", False)):
+            self._append(name, rows, len(points))
+        self._count_in(keys)
         return points
+
+    def _append(self, name: str, rows, count: int | None = None) -> None:
+        """Append ``rows`` (``count`` rows; a scalar or a row is repeated) to the per-point array ``name``.
+
+        The arrays are views of the first rows of buffers with room to grow (doubling): an
+        update writes only its new rows, where copying every array of the map each frame took
+        about as long as the rest of the update. A view handed out earlier (a target, a k-d
+        tree being built) keeps its rows: they are never written again, and a pruning makes new arrays.
+        """
+        view = getattr(self, name)
+        n = len(view)
+        count = len(rows) if count is None else count
+        buffer = self._buffers.get(name)
+        if buffer is None or view.base is not buffer or len(buffer) < n + count:
+            buffer = np.empty((max(2 * (n + count), 1024),) + view.shape[1:], dtype=view.dtype)
+            buffer[:n] = view
+            self._buffers[name] = buffer
+        buffer[n:n + count] = rows
+        setattr(self, name, buffer[:n + count])
 
     def _prune(self, position: np.ndarray) -> np.ndarray:
         """Drop the voxels whose centre is farther than ``max_distance_m`` (a check per voxel, not per point).
@@ -328,12 +342,18 @@ class LocalMap:
             forget[far] = d <= reach[far]
         self._known[rows[forget]] = False
 
-    def _recount(self, keys: np.ndarray, counts: np.ndarray) -> None:
-        """Occupied voxels and their counts from (key, count change) pairs."""
-        uniq, inverse = np.unique(keys, return_inverse=True)  # (the map's voxels arrive sorted: numpy's sort is fast)
-        total = np.bincount(inverse, weights=counts, minlength=len(uniq)).astype(np.int64)
-        keep = total > 0
-        self._voxel_keys, self._voxel_counts = uniq[keep], total[keep]
+    def _count_in(self, keys: np.ndarray) -> None:
+        """Add (K,) sorted voxel keys of points just inserted to the occupied voxels and their counts."""
+        distinct, added = np.unique(keys, return_counts=True)
+        pos = np.searchsorted(self._voxel_keys, distinct)
+        held = np.zeros(len(distinct), dtype=bool)
+        inside = pos < len(self._voxel_keys)
+        held[inside] = self._voxel_keys[pos[inside]] == distinct[inside]
+        self._voxel_counts[pos[held]] += added[held]
+        # (new voxels go in at their sorted places: one copy of the map's voxels, no sort of them)
+        fresh = ~held
+        self._voxel_keys = np.insert(self._voxel_keys, pos[fresh], distinct[fresh])
+        self._voxel_counts = np.insert(self._voxel_counts, pos[fresh], added[fresh])
 
     def target(self) -> Target:
         """The map as a registration target (world frame): a k-d tree over its points and

@@ -51,6 +51,40 @@ def test_map_caps_each_voxel_and_drops_far_points():
     assert m.update(in_one_voxel, np.zeros(3)).added == 5  # the dropped voxel takes points again
 
 
+def test_map_arrays_grow_in_place_and_earlier_targets_keep_their_rows():
+    """Updates append to the per-point arrays without rewriting them (``LocalMap._append``): a target
+    taken before an update still holds the points and normals it had, through growth and a pruning."""
+    rng = np.random.default_rng(8)
+    m = make_map(max_distance_m=30.0, prune_stride_m=5.0)
+    plane = np.c_[rng.uniform(-8, 8, (3000, 2)), np.zeros(3000)]
+    m.update(plane, np.array([0.0, 0.0, 2.0]))
+    before = m.target()
+    points, rows = before.points.copy(), np.arange(0, len(before.points), 7)
+    normals = before.normals_at(rows).copy()
+    dropped = 0
+    for step in range(1, 6):  # several updates: past the first buffer's room, and a pruning
+        shift = np.array([5.0 * step, 0.0, 0.0])
+        stats = m.update(plane + shift + [0.0, 0.0, 0.001 * step], shift + [0.0, 0.0, 2.0])
+        assert stats.added > 0
+        dropped += stats.dropped
+        assert len(m._beams) == len(m._origins) == len(m._normals) == len(m._known) == len(m) == len(m._keys)
+    assert dropped > 0  # (the first plane's far end, over 30 m behind, went)
+    np.testing.assert_array_equal(before.points, points)
+    np.testing.assert_array_equal(before.normals.take(rows, axis=0), normals)
+    assert np.isfinite(normals).all() and np.abs(normals[:, 2]).min() > 0.99
+    # the map as it stands holds what a map built at once from its points holds (in voxel order), and
+    # its normals are theirs (up to sign: the sensor positions differ)
+    fresh = make_map(max_distance_m=30.0)
+    fresh.update(m.points, np.array([25.0, 0.0, 2.0]))
+    mine, theirs = np.lexsort(m.points.T), np.lexsort(fresh.points.T)
+    np.testing.assert_array_equal(m.points[mine], fresh.points[theirs])
+    a = m.target().normals_at(mine)
+    b = fresh.target().normals_at(theirs)
+    both = np.isfinite(a[:, 0]) & np.isfinite(b[:, 0])
+    assert both.mean() > 0.9
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", a[both], b[both])), 1.0, atol=1e-9)
+
+
 def test_map_min_spacing_keeps_the_first_observation_of_a_surface():
     """With ``min_spacing_m``, a point closer than that to a map point is not added, one farther is,
     whatever room its voxel has; payloads stay with the points that were added."""
