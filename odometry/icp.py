@@ -95,7 +95,10 @@ class Target:
                 self.known = np.zeros(len(self.points), dtype=bool)
             missing = ~self.known[index]
             if missing.any():
-                rows = np.unique(index[missing])
+                # (the distinct rows, ascending: a mark per target row is cheaper than sorting them)
+                marked = np.zeros(len(self.points), dtype=bool)
+                marked[index[missing]] = True
+                rows = np.flatnonzero(marked)
                 self.normals[rows], unsure = self.estimate_normals(rows)
                 if self.uncertain is not None and unsure is not None:
                     self.uncertain[rows] = unsure
