@@ -247,10 +247,7 @@ class LocalMap:
         keys, points = keys[order], points.take(order, axis=0)
         if payload is not None:
             payload = payload[order]
-        pos = np.searchsorted(self._voxel_keys, keys)
-        inside = pos < len(self._voxel_keys)
-        known = np.zeros(len(keys), dtype=bool)
-        known[inside] = self._voxel_keys[pos[inside]] == keys[inside]
+        pos, known = self._voxel_places(keys)
         held = np.zeros(len(keys), dtype=np.int64)
         held[known] = self._voxel_counts[pos[known]]
         accept = held + rank_within_groups(keys) < self.max_points_per_voxel
@@ -330,10 +327,11 @@ class LocalMap:
         # 26 around it: those rows are checked against the changed points there (compiled, most rows
         # have no changed voxel around them); the farther-reaching (about a tenth in a city) are searched.
         short = reach <= self.voxel_size_m
-        near = short & keys_near(self._keys.take(rows), changed_keys, _NEIGHBOUR_KEY_STEPS)
+        row_keys = self._keys.take(rows)
+        near = short & keys_near(row_keys, changed_keys, _NEIGHBOUR_KEY_STEPS)
         forget = np.zeros(len(rows), dtype=bool)
         at = np.flatnonzero(near)
-        forget[at] = within_reach_of_any(self.points.take(rows[at], axis=0), self._keys.take(rows[at]), reach[at],
+        forget[at] = within_reach_of_any(self.points.take(rows[at], axis=0), row_keys[at], reach[at],
                                          changed, changed_keys, _NEIGHBOUR_KEY_STEPS)
         far = np.flatnonzero(~short)
         if len(far):
@@ -342,13 +340,18 @@ class LocalMap:
             forget[far] = d <= reach[far]
         self._known[rows[forget]] = False
 
+    def _voxel_places(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) voxel keys -> ((K,) their places among the sorted occupied voxels, (K,) bool: occupied already)."""
+        pos = np.searchsorted(self._voxel_keys, keys)
+        occupied = np.zeros(len(keys), dtype=bool)
+        inside = pos < len(self._voxel_keys)
+        occupied[inside] = self._voxel_keys[pos[inside]] == keys[inside]
+        return pos, occupied
+
     def _count_in(self, keys: np.ndarray) -> None:
         """Add (K,) sorted voxel keys of points just inserted to the occupied voxels and their counts."""
         distinct, added = np.unique(keys, return_counts=True)
-        pos = np.searchsorted(self._voxel_keys, distinct)
-        held = np.zeros(len(distinct), dtype=bool)
-        inside = pos < len(self._voxel_keys)
-        held[inside] = self._voxel_keys[pos[inside]] == distinct[inside]
+        pos, held = self._voxel_places(distinct)
         self._voxel_counts[pos[held]] += added[held]
         # (new voxels go in at their sorted places: one copy of the map's voxels, no sort of them)
         fresh = ~held
