@@ -380,6 +380,25 @@ def _probe(table_key: np.ndarray, table_id: np.ndarray, key: np.int64, shift: np
 
 
 @njit(cache=True, nogil=True)
+def _insert_keys(keys: np.ndarray, start: int, entries: int, table_key: np.ndarray, table_id: np.ndarray,
+                 shift: np.uint64, first: np.ndarray, provisional: np.ndarray, k: int) -> tuple[int, int]:
+    """``group_keys``' pass from row ``start`` until the table holds ``entries`` keys: (the row where it
+    stopped (N: done), the distinct keys found)."""
+    for r in range(start, keys.shape[0]):
+        key = keys[r]
+        h = _probe(table_key, table_id, key, shift)
+        if table_id[h] < 0:
+            if k == entries:
+                return r, k
+            table_key[h] = key
+            table_id[h] = k
+            first[k] = key
+            k += 1
+        provisional[r] = table_id[h]
+    return keys.shape[0], k
+
+
+@njit(cache=True, nogil=True)
 def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((K,) the distinct keys ascending, (N,) the slot of each key among them):
     ``numpy.unique(keys, return_inverse=True)`` for (N,) int64 keys.
@@ -388,21 +407,23 @@ def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (a scan has several points per voxel: sorting the N keys took most of a voxel grid's time).
     """
     n = keys.shape[0]
-    size, shift = _table_shift(n)
-    table_key = np.empty(size, dtype=np.int64)
-    table_id = np.full(size, -1, dtype=np.int64)
     first = np.empty(n, dtype=np.int64)  # the distinct keys, in order of first appearance
     provisional = np.empty(n, dtype=np.int64)
-    k = 0
-    for r in range(n):
-        key = keys[r]
-        h = _probe(table_key, table_id, key, shift)
-        if table_id[h] < 0:
-            table_key[h] = key
-            table_id[h] = k
-            first[k] = key
-            k += 1
-        provisional[r] = table_id[h]
+    # The table starts small and doubles when half full: sized by the distinct keys, not by N, it
+    # stays in the cache and its memory is reused (a table of N slots, megabytes, came fresh from
+    # the system every scan: a page fault per 4 kB).
+    entries = min(n, 2048)
+    r = k = 0
+    while r < n:
+        size, shift = _table_shift(entries)
+        table_key = np.empty(size, dtype=np.int64)
+        table_id = np.full(size, -1, dtype=np.int64)
+        for i in range(k):
+            h = _probe(table_key, table_id, first[i], shift)
+            table_key[h] = first[i]
+            table_id[h] = i
+        r, k = _insert_keys(keys, r, entries, table_key, table_id, shift, first, provisional, k)
+        entries *= 2
     order = np.argsort(first[:k])
     rank = np.empty(k, dtype=np.int64)
     for i in range(k):

@@ -113,6 +113,11 @@ def test_voxel_keys_and_grouping_agree_with_numpy():
     u, inverse = np.unique(keys, return_inverse=True)
     np.testing.assert_array_equal(distinct, u)
     np.testing.assert_array_equal(slot, inverse)
+    # the hash table grows as distinct keys arrive (from 2048): across its sizes, and with none
+    for n_distinct in (0, 1, 2048, 2049, 9000):
+        some = rng.permutation(np.repeat(rng.choice(keys, n_distinct, replace=False), 3))
+        for got, expected in zip(kernels.group_keys(some), np.unique(some, return_inverse=True), strict=True):
+            np.testing.assert_array_equal(got, expected)
     values = rng.random(20000)
     sums, value_sums, counts = kernels.voxel_sums(slot, len(u), p, values)
     np.testing.assert_array_equal(counts, np.bincount(inverse))
