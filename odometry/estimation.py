@@ -55,9 +55,16 @@ def point_to_plane_step(source: np.ndarray, target: np.ndarray, target_normals: 
     ``mode="prior"``, held to the prior by a motion prior of that information per match
     (``deviation``: the current estimate's offset from it, (6,) twist).
     """
-    n = len(source)
     H, g, sum_r2 = plane_normal_equations(*(np.ascontiguousarray(a, dtype=np.float64)
                                             for a in (source, target, target_normals)))
+    return plane_step(H, g, sum_r2, len(source), rcond, min_eigenvalue, rotation_scale_m, mode, deviation)
+
+
+def plane_step(H: np.ndarray, g: np.ndarray, sum_r2: float, n: int, rcond: float = 1e-10,
+               min_eigenvalue: float = 0.0, rotation_scale_m: float = 10.0, mode: str = "remap",
+               deviation: np.ndarray | None = None) -> PlaneStep:
+    """``point_to_plane_step`` from its system: H (6, 6) ``J^T J``, g (6,) ``J^T r`` and the sum of r^2
+    (m^2) of n matches (``odometry.kernels.plane_normal_equations``)."""
     solve = remapped_step(H, g, n, rotation_scale_m, min_eigenvalue, rcond, mode, deviation)
     return PlaneStep(se3.exp(solve.xi), solve.xi, H, solve.rank, float(np.sqrt(sum_r2 / n)) if n else 0.0,
                      solve.remapped)

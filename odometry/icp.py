@@ -18,11 +18,11 @@ from simlidar import se3
 
 from .config import OdometryConfig
 from .constraints import restore_constraints, weakest_translation
-from .estimation import point_to_plane_step
+from .estimation import plane_step
 from .kdtree import KDTree
-from .kernels import reusable_matches
+from .kernels import more_plane_rows, plane_gate, plane_normal_equations, reusable_matches, standard_rejection_system
 from .poles import PoleTarget, pole_rows
-from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, trimmed_rejector
+from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, standard_chain, trimmed_rejector
 
 
 @dataclass
@@ -188,13 +188,29 @@ def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
 
 def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndarray, config: OdometryConfig
                   ) -> tuple[Matches, dict]:
-    """The matches the rejectors see: those whose target point has a usable plane.
+    """The matches the rejectors see: those whose target point has a usable plane (``usable_planes``).
+
+    Returns the kept matches, carrying their target normals (``Matches.target_normals``), and the counts.
+    """
+    keep, counts = usable_planes(m, target, moved, centre, config)
+    return (m if keep is None else m.select(keep)), counts
+
+
+# (no NCF verdicts: every plane is sure; no GCR bounds)
+_NO_VERDICTS = np.zeros(0, dtype=bool)
+_NO_BOUNDS = np.zeros(0)
+
+
+def usable_planes(m: Matches, target: Target, moved: np.ndarray, centre: np.ndarray, config: OdometryConfig
+                  ) -> tuple[np.ndarray | None, dict]:
+    """Which matches have a usable plane at their target point: ((m,) bool, or None for all; counts).
 
     A target with normals on demand (a raw scan, a map) has a nan normal where its
     neighbourhood is no plane: those matches are dropped. A map's normals the NCF
     found too uncertain are dropped too, unless they are the last evidence of a
     direction (``odometry.constraints.restore_constraints``, with
     ``degeneracy.min_constraint_eigenvalue``). A target with fixed normals passes every match.
+    Sets ``m.target_normals`` (m, 3), the target's normal at each match.
 
     Args:
         m: the candidate matches. target: what they index into.
@@ -203,26 +219,29 @@ def plane_matches(m: Matches, target: Target, moved: np.ndarray, centre: np.ndar
         config: its ``degeneracy`` section (``min_constraint_eigenvalue``, ``rotation_scale_m``).
 
     Returns:
-        The kept matches, carrying their target normals (``Matches.target_normals``), and their
-        counts: {"plane": with a plane, "ncf": of those NCF-sure, "restored": uncertain ones kept},
+        The keep mask (None: a target with fixed normals keeps all), and the counts:
+        {"plane": with a plane, "ncf": of those NCF-sure, "restored": uncertain ones kept},
         or {} for a target with fixed normals.
     """
     m.target_normals = target.normals_at(m.target_index)  # (looked up once: the matches carry them on)
     if target.estimate_normals is None:
-        return m, {}
-    m = m.select(np.isfinite(m.target_normals[:, 0]))
-    counts = {"plane": len(m)}
-    if target.uncertain is not None:
-        sure = ~target.uncertain[m.target_index]
-        keep = sure
-        if config.degeneracy.min_constraint_eigenvalue > 0 and not sure.all():
-            keep = restore_constraints(moved.take(m.source_index, axis=0) - centre, m.target_normals,
-                                       np.ones(len(m), dtype=bool), sure, config.degeneracy.min_constraint_eigenvalue,
-                                       config.degeneracy.rotation_scale_m)
-        counts["ncf"] = int(sure.sum())
-        counts["restored"] = int((keep & ~sure).sum())
-        m = m.select(keep)
-    return m, counts
+        return None, {}
+    dg = config.degeneracy
+    verdicts = _NO_VERDICTS if target.uncertain is None else target.uncertain
+    # (one compiled pass: both gates, and the information of the sure planes for the restore's check)
+    plane, sure, H_sure = plane_gate(moved, centre, m.source_index, m.target_index, m.target_normals, verdicts,
+                                     float(dg.rotation_scale_m))
+    n_plane = int(np.count_nonzero(plane))
+    if target.uncertain is None:
+        return plane, {"plane": n_plane}
+    n_sure = int(np.count_nonzero(sure))
+    keep = sure
+    if dg.min_constraint_eigenvalue > 0 and n_sure < n_plane \
+            and np.linalg.eigh(H_sure / n_plane)[0][0] < dg.min_constraint_eigenvalue:
+        # (rare: a direction the sure planes leave weak; ``restore_constraints`` checks the same H first)
+        keep = restore_constraints(moved.take(m.source_index, axis=0) - centre, m.target_normals, plane, sure,
+                                   dg.min_constraint_eigenvalue, dg.rotation_scale_m)
+    return keep, {"plane": n_plane, "ncf": n_sure, "restored": int(np.count_nonzero(keep)) - n_sure}
 
 
 def converged(xi: np.ndarray, T: np.ndarray, config: OdometryConfig) -> bool:
@@ -272,29 +291,43 @@ def register(
     seconds = {"match": 0.0, "reject": 0.0, "estimate": 0.0}
     # The distance rejector's bound also limits the k-d tree search.
     bound = config.match.max_correspondence_distance_m
+    chain = standard_chain(rejectors)  # (None: a chain of other rejectors, run one by one)
     for it in range(1, config.icp.max_iterations + 1):
         t0 = time.perf_counter()
         moved = source.points @ T[:3, :3].T + T[:3, 3]
         m = match(moved, target, bound)
         t1 = time.perf_counter()
-        m, gate = plane_matches(m, target, moved, centre, config)
+        keep, gate = usable_planes(m, target, moved, centre, config)
         counts = {"candidates": len(source.points), **gate}
         if source.gcr_threshold_m is None and source.gcr_thresholds is not None:
             # GCR thresholds from the target's normals at these first matches, turned into the
             # source frame (a point without a match now has no bound: inf, the rejector abstains)
+            first = m if keep is None else m.select(keep)
             thr = np.full(len(source.points), np.inf)
-            n_src = m.target_normals @ T[:3, :3]
-            thr[m.source_index] = source.gcr_thresholds(source.points[m.source_index], n_src, m.source_index)
+            n_src = first.target_normals @ T[:3, :3]
+            thr[first.source_index] = source.gcr_thresholds(source.points[first.source_index], n_src,
+                                                            first.source_index)
             source.gcr_threshold_m = thr
-        for reject in rejectors:
-            m = m.select(reject(m, source))
-            counts[reject.__name__] = len(m)
+        if chain is not None and (source.gcr_threshold_m is not None or not chain.gcr):
+            # the standard chain and the system of what it keeps in one compiled pass (same values)
+            left, H, g, sum_r2 = standard_rejection_system(
+                moved, target.points, m.target_normals, m.source_index, m.target_index, m.distance_m,
+                np.ones(len(m), dtype=bool) if keep is None else keep, chain.max_distance_m,
+                source.gcr_threshold_m if chain.gcr else _NO_BOUNDS, chain.trim_fraction, centre)
+            counts.update((name, int(left[stage])) for name, stage in chain.counted)
+            n_kept = int(left[-1])
+        else:
+            m = m if keep is None else m.select(keep)
+            for reject in rejectors:
+                m = m.select(reject(m, source))
+                counts[reject.__name__] = len(m)
+            n_kept, H = len(m), None
         t2 = time.perf_counter()
         seconds["match"] += t1 - t0
         seconds["reject"] += t2 - t1
         res.matches = counts
-        res.n_matches = len(m)
-        if len(m) < config.filter.min_points:
+        res.n_matches = n_kept
+        if n_kept < config.filter.min_points:
             res.singular = True
             break
         deviation = None
@@ -304,16 +337,20 @@ def register(
             E = T @ se3.inverse(T_init)
             E[:3, 3] += E[:3, :3] @ centre - centre
             deviation = se3.log(E)
-        rows = (moved.take(m.source_index, axis=0), target.points.take(m.target_index, axis=0), m.target_normals)
+        if H is None:
+            H, g, sum_r2 = plane_normal_equations(moved.take(m.source_index, axis=0) - centre,
+                                                  target.points.take(m.target_index, axis=0) - centre,
+                                                  np.ascontiguousarray(m.target_normals, dtype=np.float64))
+        n_rows = n_kept
         if source.poles is not None and len(source.poles) and target.poles is not None:
-            # the poles' horizontal constraints beside the planes' (``odometry.poles``)
-            poles = pole_rows(source.poles @ T[:3, :3].T + T[:3, 3], target.poles, bound)
-            counts["poles"] = len(poles[0]) // 2
-            rows = tuple(np.vstack([a, b]) for a, b in zip(rows, poles, strict=True))
-        n_rows = len(rows[0])
-        step = point_to_plane_step(rows[0] - centre, rows[1] - centre, rows[2], min_eigenvalue=min_eigenvalue,
-                                   rotation_scale_m=config.degeneracy.rotation_scale_m,
-                                   mode=config.degeneracy.weak_direction_update, deviation=deviation)
+            # the poles' horizontal constraints beside the planes' (``odometry.poles``), summed after them
+            p, q, n = pole_rows(source.poles @ T[:3, :3].T + T[:3, 3], target.poles, bound)
+            counts["poles"] = len(p) // 2
+            H, g, sum_r2 = more_plane_rows(H, g, sum_r2, p - centre, q - centre, n)
+            n_rows += len(p)
+        step = plane_step(H, g, sum_r2, n_rows, min_eigenvalue=min_eigenvalue,
+                          rotation_scale_m=config.degeneracy.rotation_scale_m,
+                          mode=config.degeneracy.weak_direction_update, deviation=deviation)
         seconds["estimate"] += time.perf_counter() - t2
         res.iterations, res.rms_m, res.H, res.remapped = it, step.rms_m, step.H, step.remapped
         res.n_matches = n_rows

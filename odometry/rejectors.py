@@ -3,7 +3,11 @@
 ``matches`` are the current nearest-neighbour pairs; ``source`` is the
 registration's source (``odometry.icp.Source``), which carries what a rejector
 may need beyond the distances (the GCR's per-point thresholds). The ICP applies
-them in order, each to the matches the previous ones kept.
+them in order, each to the matches the previous ones kept. The chain the ICP's
+configuration makes (``StandardChain``: distance, GCR, trimming) it runs as one
+compiled pass with the normal equations (``odometry.kernels.standard_rejection_system``:
+the same matches kept, save which of several at the trimming's cut distance), any other
+chain one rejector after another.
 """
 
 from __future__ import annotations
@@ -42,6 +46,36 @@ class Matches:
 Rejector = Callable[[Matches, object], np.ndarray]
 
 
+@dataclass(frozen=True)
+class StandardChain:
+    """What a chain of the rejectors below does, when it is one: the distance rejector's bound (m),
+    then GCR (on or off), then trimming (the fraction dropped, 0: none). ``counted``: each
+    rejector's name and its stage among (distance, GCR, trimming), in the chain's order."""
+
+    max_distance_m: float
+    gcr: bool
+    trim_fraction: float
+    counted: tuple[tuple[str, int], ...]
+
+
+def standard_chain(rejectors) -> StandardChain | None:
+    """The ``StandardChain`` a sequence of rejectors is (distance, optionally GCR, optionally trimming,
+    in that order, as ``odometry.icp.rejectors_for`` makes), or None for any other chain."""
+    rest = list(rejectors)
+    if not rest or not hasattr(rest[0], "max_distance_m"):
+        return None
+    counted = [(rest[0].__name__, 0)]
+    max_distance_m = rest.pop(0).max_distance_m
+    gcr = bool(rest) and getattr(rest[0], "per_source_bound", False)
+    if gcr:
+        counted.append((rest.pop(0).__name__, 1))
+    trim = 0.0
+    if rest and hasattr(rest[0], "trim_fraction"):
+        counted.append((rest[0].__name__, 2))
+        trim = rest.pop(0).trim_fraction
+    return None if rest else StandardChain(float(max_distance_m), gcr, float(trim), tuple(counted))
+
+
 def distance_rejector(max_distance_m: float) -> Rejector:
     """The baseline's Euclidean distance rejector: keep matches closer than ``max_distance_m``."""
 
@@ -49,6 +83,7 @@ def distance_rejector(max_distance_m: float) -> Rejector:
         return matches.distance_m < max_distance_m
 
     reject.__name__ = "distance"
+    reject.max_distance_m = max_distance_m  # (what the ICP's compiled pass of the standard chain reads)
     return reject
 
 
@@ -64,6 +99,7 @@ def trimmed_rejector(fraction: float) -> Rejector:
         return keep
 
     reject.__name__ = "trimmed"
+    reject.trim_fraction = fraction
     return reject
 
 
@@ -78,4 +114,5 @@ def geometric_rejector() -> Rejector:
         return matches.distance_m < source.gcr_threshold_m[matches.source_index]
 
     reject.__name__ = "gcr"
+    reject.per_source_bound = True
     return reject

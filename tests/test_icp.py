@@ -91,6 +91,22 @@ def test_rejectors():
     assert keep.sum() == 80 and not keep[80:].any()
 
 
+def test_the_chains_the_configs_make_are_recognised_and_no_other():
+    from odometry.icp import rejectors_for
+    from odometry.rejectors import geometric_rejector, standard_chain
+
+    salo = standard_chain(rejectors_for(SALO))
+    assert (salo.max_distance_m, salo.gcr, salo.trim_fraction) == (SALO.match.max_correspondence_distance_m, True,
+                                                                    SALO.match.trim_fraction)
+    assert salo.counted == (("distance", 0), ("gcr", 1), ("trimmed", 2))
+    assert standard_chain(rejectors_for(BL.replace(match={"trim_fraction": 0.0}))).counted == (("distance", 0),)
+    assert standard_chain([distance_rejector(1.0), trimmed_rejector(0.1)]).counted == (("distance", 0), ("trimmed", 2))
+    for other in ([], [trimmed_rejector(0.2), distance_rejector(1.0)], [geometric_rejector()],
+                  [distance_rejector(1.0), lambda m, s: m.distance_m < 0.5],
+                  [distance_rejector(1.0), trimmed_rejector(0.2), geometric_rejector()]):
+        assert standard_chain(other) is None
+
+
 def test_termination():
     cfg = BL
     assert converged(np.array([1e-5, 0, 0, 0, 0, 0]), np.eye(4), cfg)

@@ -101,6 +101,80 @@ def test_reusable_matches_keep_only_nearest_neighbours_they_can_prove():
     assert set(np.flatnonzero(np.isinf(d2[:, 0]))) <= set(redo)  # no neighbour then: searched again
 
 
+def test_more_plane_rows_continue_one_system():
+    rng = np.random.default_rng(1)
+    p = rng.uniform(-40, 40, size=(500, 3))
+    q = p + rng.normal(scale=0.05, size=p.shape)
+    n = unit_rows(rng, 500)
+    whole = kernels.plane_normal_equations(p, q, n)
+    first = kernels.plane_normal_equations(p[:300], q[:300], n[:300])
+    H0 = first[0].copy()
+    for got, expected in zip(kernels.more_plane_rows(*first, p[300:], q[300:], n[300:]), whole, strict=True):
+        np.testing.assert_array_equal(got, expected)  # (the same sums in the same order)
+    np.testing.assert_array_equal(first[0], H0)  # (the given system is left as it was)
+
+
+def test_plane_gate_is_the_plane_and_ncf_masks_and_the_sure_information():
+    rng = np.random.default_rng(2)
+    moved = rng.uniform(-30, 30, size=(900, 3))
+    target_index = rng.integers(0, 400, size=700)
+    source_index = np.sort(rng.choice(900, 700, replace=False))
+    normals = unit_rows(rng, 700)
+    normals[::9] = np.nan  # no plane there
+    uncertain = rng.random(400) < 0.3
+    centre = np.array([3.0, -2.0, 0.5])
+    plane, sure, H = kernels.plane_gate(moved, centre, source_index, target_index, normals, uncertain, 12.0)
+    np.testing.assert_array_equal(plane, np.isfinite(normals[:, 0]))
+    np.testing.assert_array_equal(sure, plane & ~uncertain[target_index])
+    assert 0 < sure.sum() < plane.sum() < 700
+    expected = kernels.constraint_information(moved[source_index] - centre, normals, np.flatnonzero(sure), 12.0)
+    np.testing.assert_array_equal(H, expected)
+    plane, every, _ = kernels.plane_gate(moved, centre, source_index, target_index, normals, np.zeros(0, bool), 12.0)
+    np.testing.assert_array_equal(every, plane)  # no verdicts: every plane is sure
+
+
+def test_standard_rejection_system_is_the_rejector_chain_and_its_system():
+    from odometry.rejectors import Matches, distance_rejector, geometric_rejector, trimmed_rejector
+
+    rng = np.random.default_rng(3)
+    moved = rng.uniform(-30, 30, size=(1200, 3))
+    target_points = rng.uniform(-30, 30, size=(500, 3))
+    source_index = np.sort(rng.choice(1200, 1000, replace=False))
+    target_index = rng.integers(0, 500, size=1000)
+    normals = unit_rows(rng, 1000)
+    centre = np.array([1.0, 2.0, -0.5])
+    bound = rng.uniform(0.0, 1.2, size=1200)
+    bound[::13] = np.inf  # (no bound known: the rejector abstains)
+    bound[::17] = np.nan
+    keep = rng.random(1000) < 0.9
+    source = type("S", (), {"gcr_threshold_m": bound})()
+    for quantum in (0.0, 0.05):  # distinct distances, then many ties at the trimming's cut
+        distance = rng.uniform(0.0, 1.5, size=1000)
+        if quantum:
+            distance = np.round(distance / quantum) * quantum
+        for gcr, trim in ((True, 0.2), (False, 0.2), (True, 0.0), (False, 0.0), (True, 1.0)):
+            counts, H, g, sum_r2 = kernels.standard_rejection_system(
+                moved, target_points, normals, source_index, target_index, distance, keep, 1.0,
+                bound if gcr else np.zeros(0), trim, centre)
+            m = Matches(source_index, target_index, distance, normals).select(keep)
+            expected = []
+            for reject in [distance_rejector(1.0)] + ([geometric_rejector()] if gcr else []):
+                m = m.select(reject(m, source))
+                expected.append(len(m))
+            # (trimming with the first rows kept among those at the cut's distance: a stable sort)
+            n_keep = len(m) - int(np.floor(trim * len(m)))
+            if not quantum:
+                assert trimmed_rejector(trim)(m, source).sum() == n_keep
+            rows = np.sort(np.argsort(m.distance_m, kind="stable")[:n_keep])
+            assert counts.tolist() == [expected[0], expected[-1], n_keep]
+            kept = m.select(np.isin(np.arange(len(m)), rows))
+            system = kernels.plane_normal_equations(moved[kept.source_index] - centre,
+                                                    target_points[kept.target_index] - centre, kept.target_normals)
+            for got, want in zip((H, g, sum_r2), system, strict=True):
+                np.testing.assert_array_equal(got, want)
+    assert n_keep == 0 and not H.any()  # (everything trimmed: an empty system)
+
+
 def test_voxel_keys_and_grouping_agree_with_numpy():
     rng = np.random.default_rng(5)
     p = rng.uniform(-60, 60, size=(20000, 3))

@@ -342,6 +342,25 @@ def test_the_maps_spacing_check_answers_as_a_search_with_a_thinned_source(city_s
     assert all(d.filter_counts["source"] < d.filter_counts["voxels"] for d in run.diagnostics)
 
 
+@pytest.mark.parametrize("name", ["salo-map", "salo", "bl-map"])
+def test_the_standard_chain_in_one_compiled_pass_is_the_rejectors_one_by_one(city_sequence, name, monkeypatch):
+    """``register`` runs the chain ``rejectors_for`` makes (distance, GCR, trimming) and the normal
+    equations in one compiled pass; any other chain runs its rejectors one by one. On the same frames
+    both give the same poses and the same match counts (the simulated distances have no ties at the
+    trimming's cut, where the two may keep different matches)."""
+    import odometry.icp
+
+    frames = slice(0, 12)
+    fast = run_sequence(city_sequence, variant(name), frames=frames, prefetch=0)
+    monkeypatch.setattr(odometry.icp, "standard_chain", lambda rejectors: None)
+    slow = run_sequence(city_sequence, variant(name), frames=frames, prefetch=0)
+    np.testing.assert_array_equal(np.stack(fast.poses), np.stack(slow.poses))
+    assert [d.matches for d in fast.diagnostics] == [d.matches for d in slow.diagnostics]
+    assert any("trimmed" in d.matches and d.matches["trimmed"] < d.matches["distance"] for d in fast.diagnostics)
+    rel = se3.inverse(city_sequence.poses[0]) @ city_sequence.poses[frames]
+    assert np.linalg.norm(fast.poses[:, :3, 3] - rel[:, :3, 3], axis=1).max() < 0.05  # (and on the truth)
+
+
 def test_joint_deskew_takes_fewer_iterations_and_stays_on_the_truth(city_sequence):
     """``deskew.joint`` (the default, with one refinement): the de-skew is redone at every ICP step and
     once more after, where it was redone only after the ICP, twice. The frames take fewer ICP
