@@ -65,7 +65,7 @@ from typing import Literal
 
 import numpy as np
 
-from .kernels import neighbour_beam_distance_table
+from .kernels import neighbour_beam_distance_table, row_max_with_floor
 
 KITTI_VERTICAL_ANGLE_CORRECTION_DEG = 0.205
 
@@ -200,13 +200,7 @@ def gcr_threshold_m(
         (M,) thresholds: inf at grazing incidence, nan where no neighbour beam
         exists (a single-ring sensor) or the input is not finite.
     """
-    d = neighbour_beam_distances(points, normals, rings, sensor, formula)
-    finite_any = np.any(~np.isnan(d), axis=1)
-    thr = np.full(len(d), np.nan)
-    thr[finite_any] = np.nanmax(d[finite_any], axis=1)
-    if noise_floor_m > 0:
-        thr = np.where(np.isnan(thr), thr, np.maximum(thr, noise_floor_m))
-    return thr
+    return row_max_with_floor(neighbour_beam_distances(points, normals, rings, sensor, formula), float(noise_floor_m))
 
 
 def gcr_keep(

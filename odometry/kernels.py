@@ -801,6 +801,21 @@ def neighbour_beam_distance_table(points: np.ndarray, normals: np.ndarray, pitch
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def row_max_with_floor(table: np.ndarray, floor: float) -> np.ndarray:
+    """(M,) ``numpy.nanmax(table, axis=1)`` of an (M, C) table, raised to at least ``floor`` (nan where a
+    row has no number: stays nan). ``odometry.gcr.gcr_threshold_m``'s max over the neighbour beams."""
+    out = np.empty(table.shape[0])
+    for i in range(table.shape[0]):
+        best = np.nan
+        for c in range(table.shape[1]):
+            v = table[i, c]
+            if not math.isnan(v) and (math.isnan(best) or v > best):
+                best = v
+        out[i] = floor if best < floor else best  # (a nan compares false: it stays nan)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def foreground_runs(image: np.ndarray, points: np.ndarray, times: np.ndarray, azimuth_step_rad: float,
                     max_width_m: float, min_gap_m: float, gap_fraction: float, run_tol_m: float,
                     run_tol_fraction: float, max_column_gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -175,6 +175,19 @@ def test_standard_rejection_system_is_the_rejector_chain_and_its_system():
     assert n_keep == 0 and not H.any()  # (everything trimmed: an empty system)
 
 
+def test_row_max_with_floor_is_nanmax_raised_to_the_floor():
+    rng = np.random.default_rng(4)
+    table = rng.uniform(0.0, 0.3, size=(400, 4))
+    table[rng.random(table.shape) < 0.3] = np.nan
+    table[::7] = np.nan  # rows without a number
+    table[::11, 2] = np.inf  # grazing incidence
+    for floor in (0.0, 0.1):
+        with np.errstate(invalid="ignore"), pytest.warns(RuntimeWarning):
+            expected = np.nanmax(table, axis=1)
+        expected = np.where(np.isnan(expected), expected, np.maximum(expected, floor))
+        np.testing.assert_array_equal(kernels.row_max_with_floor(table, floor), expected)
+
+
 def test_voxel_keys_and_grouping_agree_with_numpy():
     rng = np.random.default_rng(5)
     p = rng.uniform(-60, 60, size=(20000, 3))
