@@ -10,6 +10,8 @@ wheel odometry); the simulator's ``true_xyz`` is the exact answer to check it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from simlidar import se3
@@ -75,8 +77,24 @@ def deskew(points: np.ndarray, times_s: np.ndarray, motion_per_frame: np.ndarray
     return screw_apply(se3.log(motion_per_frame), np.asarray(times_s) / frame_period_s, points)
 
 
+@dataclass
+class RedeskewMemo:
+    """What the last ``redeskew`` of one array left for the next (an ICP re-de-skews its source at every
+    step, each time from the twist the last one de-skewed it with).
+
+    twist: (6,) the twist it de-skewed with; fractions: (M,) its points' times over the frame period;
+    scalars: (M, 4) their ``kernels.rescrew_motion`` scalars of that twist (cosine, sine and the left
+    Jacobian's two factors), which undoing it takes again. None before the first.
+    """
+
+    twist: np.ndarray | None = None
+    fractions: np.ndarray | None = None
+    scalars: np.ndarray | None = None
+
+
 def redeskew(points: np.ndarray, normals: np.ndarray | None, times_s: np.ndarray, old_motion: np.ndarray,
-             new_motion: np.ndarray, frame_period_s: float) -> tuple[np.ndarray, np.ndarray | None]:
+             new_motion: np.ndarray, frame_period_s: float, memo: RedeskewMemo | None = None
+             ) -> tuple[np.ndarray, np.ndarray | None]:
     """Re-do the de-skew of already de-skewed points (and normals) with a better motion.
 
     points, normals: (M, 3) de-skewed with ``old_motion`` (normals None: points only);
@@ -84,15 +102,29 @@ def redeskew(points: np.ndarray, normals: np.ndarray | None, times_s: np.ndarray
     ``new_motion`` would have de-skewed them: ``T_new(t) T_old(t)^-1`` applied per point.
     The motions are (4, 4) transforms or their (6,) twists (``se3.log``: a caller moving
     several arrays by the same motions takes the logarithms once).
+    memo: kept by the caller for one array re-de-skewed again and again: when the last call
+    de-skewed these times with exactly ``old_motion``, its per-point scalars spare the undo its
+    trigonometry (the same numbers, so the same result); updated for the next call.
     """
     points = _rows(points)
     if normals is not None and np.shape(normals) != points.shape:
         raise ValueError(f"normals must be shaped as the points {points.shape}, got {np.shape(normals)}")
     s = np.ascontiguousarray(np.broadcast_to(np.asarray(times_s, dtype=np.float64) / frame_period_s, (len(points),)))
+    xi_old, xi_new = twist_of(old_motion), twist_of(new_motion)
+    old_scalars = new_scalars = _NO_SCALARS
+    if memo is not None:
+        if memo.scalars is not None and np.array_equal(memo.twist, xi_old) and np.array_equal(memo.fractions, s):
+            old_scalars = memo.scalars
+        new_scalars = np.empty((len(points), 4))
     # (exp(-s xi_old) undoes the old de-skew, exp(s xi_new) does the new one: one compiled pass)
-    p, n = rescrew_motion(twist_of(old_motion), twist_of(new_motion), s, points,
-                          _NO_ROWS if normals is None else _rows(normals))
+    p, n = rescrew_motion(xi_old, xi_new, s, points, _NO_ROWS if normals is None else _rows(normals), old_scalars,
+                          new_scalars)
+    if memo is not None:
+        memo.twist, memo.fractions, memo.scalars = xi_new.copy(), s, new_scalars
     return p, None if normals is None else n
+
+
+_NO_SCALARS = np.zeros((0, 4))
 
 
 def twist_of(motion: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ from simlidar.sensor import LidarModel
 
 from .config import OdometryConfig
 from .constraints import restore_constraints
+from .deskew import RedeskewMemo
 from .kdtree import KDTree
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import knn, neighbourhood_pca
@@ -76,6 +77,7 @@ class FilteredScan:
     poles: the scan's poles (``odometry.poles``), de-skewed as ``points`` are, or None (not extracted).
     centroid_rows: (M,) the row of ``centroids`` each point is, when the points are the centroids thinned
         (``filter.source_voxel_size_m``), else None.
+    points_redeskew: what the last re-de-skew of ``points`` leaves the next (``deskew.redeskew``).
     """
 
     points: np.ndarray
@@ -92,6 +94,7 @@ class FilteredScan:
     points_tree: tuple[np.ndarray, Future] | None = None
     poles: Poles | None = None
     centroid_rows: np.ndarray | None = None
+    points_redeskew: RedeskewMemo = field(default_factory=RedeskewMemo)
 
     def __len__(self) -> int:
         return len(self.points)

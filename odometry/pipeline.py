@@ -257,7 +257,7 @@ def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.nda
     # (a scan registered against a map has no normals of its own: nan rows, which stay nan)
     without_normals = len(scan.normals) > 0 and bool(np.isnan(scan.normals[:, 0]).all())
     scan.points, normals = redeskew(scan.points, None if without_normals else scan.normals, scan.times_s,
-                                    old_motion, new_motion, period_s)
+                                    old_motion, new_motion, period_s, scan.points_redeskew)
     if not without_normals:
         scan.normals = normals
     poles = scan.poles

@@ -312,6 +312,31 @@ def test_redeskew_points_alone_match_points_with_normals():
     np.testing.assert_array_equal(n_both, screw_apply(se3.log(new), s, screw_apply(-se3.log(old), s, n, True), True))
 
 
+def test_redeskew_with_a_memo_of_the_last_one_gives_the_same_points():
+    """A chain of re-de-skews (as the joint de-skew makes, one per ICP step) with the memo, which spares
+    each undo its trigonometry, moves the points exactly as without; a memo of other times or another
+    twist is not used."""
+    from odometry.deskew import RedeskewMemo
+
+    rng = np.random.default_rng(4)
+    p = rng.uniform(-30, 30, size=(300, 3))
+    n = rng.normal(size=(300, 3))
+    t = rng.uniform(0.0, 0.1, size=300)
+    twists = [np.zeros(6)] + [np.array([0.8, 0.05, 0.01, 0.0, 0.003, 0.02]) * (1 + 0.01 * k) for k in range(4)]
+    memo = RedeskewMemo()
+    plain, memoed = (p, n), (p, n)
+    for old, new in zip(twists, twists[1:], strict=False):
+        plain = redeskew(*plain, t, old, new, 0.1)
+        memoed = redeskew(*memoed, t, old, new, 0.1, memo)
+        for a, b in zip(plain, memoed, strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert np.array_equal(memo.twist, twists[-1]) and memo.scalars.shape == (300, 4)
+    kept = memo.scalars
+    moved, _ = redeskew(p, None, t[::-1].copy(), twists[-1], twists[1], 0.1, memo)  # other times: computed anew
+    np.testing.assert_array_equal(moved, redeskew(p, None, t[::-1].copy(), twists[-1], twists[1], 0.1)[0])
+    assert memo.scalars is not kept
+
+
 @pytest.mark.parametrize("angle", [0.0, 1e-13, 1e-7, 1e-3, 0.5, 2.0, np.pi - 1e-7])
 def test_se3_of_one_transform_agrees_with_the_batched_scipy_path(angle):
     """exp and log of a single (4, 4) / (6,) take a path of their own (no scipy Rotation call overhead):

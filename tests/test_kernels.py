@@ -400,11 +400,22 @@ def test_rescrew_motion_is_undoing_one_screw_then_doing_another():
     xi_new = np.array([1.1, -0.02, 0.0, 0.0, 0.001, 0.025])
     p1, n1 = kernels.screw_motion(-xi_old, s, p, n)
     p2, n2 = kernels.screw_motion(xi_new, s, p1, n1)
-    p3, n3 = kernels.rescrew_motion(xi_old, xi_new, s, p, n)
+    none = np.zeros((0, 4))
+    old_scalars, new_scalars = np.empty((400, 4)), np.empty((400, 4))
+    kernels.rescrew_motion(np.zeros(6), xi_old, s, p, n, none, old_scalars)  # (the scalars of xi_old)
+    p3, n3 = kernels.rescrew_motion(xi_old, xi_new, s, p, n, none, none)
     np.testing.assert_array_equal(p3, p2)
     np.testing.assert_array_equal(n3, n2)
+    # given the scalars of the old twist (the undo's), the same; the new twist's are handed back
+    p4, n4 = kernels.rescrew_motion(xi_old, xi_new, s, p, n, old_scalars, new_scalars)
+    np.testing.assert_array_equal(p4, p2)
+    np.testing.assert_array_equal(n4, n2)
+    phi = s * np.linalg.norm(xi_new[3:])
+    np.testing.assert_allclose(new_scalars, np.stack([np.cos(phi), np.sin(phi), s * (1 - np.cos(phi)) / phi,
+                                                      s * (phi - np.sin(phi)) / phi], axis=1), rtol=1e-9)
     # a zero old twist undoes nothing; a pure translation moves by s rho
-    np.testing.assert_array_equal(kernels.rescrew_motion(np.zeros(6), xi_new, s, p, n)[0],
+    np.testing.assert_array_equal(kernels.rescrew_motion(np.zeros(6), xi_new, s, p, n, none, none)[0],
                                   kernels.screw_motion(xi_new, s, p, n)[0])
     shift = np.array([1.0, 2.0, 3.0, 0, 0, 0])
-    np.testing.assert_allclose(kernels.rescrew_motion(np.zeros(6), shift, s, p, p[:0])[0], p + s[:, None] * shift[:3])
+    np.testing.assert_allclose(kernels.rescrew_motion(np.zeros(6), shift, s, p, p[:0], none, none)[0],
+                               p + s[:, None] * shift[:3])
