@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import fill_range_image
+from .kernels import adjacent_ring_neighbourhoods, fill_range_image
 
 
 def azimuth_columns(points: np.ndarray, n_columns: int) -> np.ndarray:
@@ -74,36 +74,10 @@ def widen_one_ring_neighbourhoods(
         (M, k) neighbour rows (a copy; the k - k // 2 nearest of a widened neighbourhood stay, its last
         k // 2 are the adjacent ring's points nearest in azimuth), and (M,) bool: which were widened.
     """
-    idx = np.array(neighbour_indices, dtype=np.intp)
-    m, k = idx.shape
-    half = k // 2
-    rings = np.asarray(rings, dtype=np.int64)  # a driver's uint16 rings would wrap at ring - 1
-    own = rings[idx]
-    one_ring = np.flatnonzero(np.all(own == own[:, :1], axis=1))
-    widened = np.zeros(m, dtype=bool)
-    if len(one_ring) == 0 or half == 0:
-        return idx, widened
+    idx = np.ascontiguousarray(neighbour_indices, dtype=np.intp)
+    rings = np.ascontiguousarray(rings, dtype=np.int64)  # a driver's uint16 rings would wrap at ring - 1
     image = range_image(rings, cloud, n_rings, n_columns)
-    q = np.asarray(query_points, dtype=np.float64)[one_ring]
-    column = azimuth_columns(q, n_columns)
-    # the cells of a ring around the query's column, nearest column first: 0, -1, +1, -2, +2, ...
-    offsets = np.array([0] + [s * i for i in range(1, half + 1) for s in (-1, 1)])
-    columns = (column[:, None] + offsets[None, :]) % n_columns
-    best_rows = np.zeros((len(one_ring), half), dtype=np.intp)
-    best_reach = np.full(len(one_ring), np.inf)
-    for step in (-1, 1):
-        adjacent = own[one_ring, 0] + step
-        exists = (adjacent >= 0) & (adjacent < n_rings)
-        cells = image[np.clip(adjacent, 0, n_rings - 1)[:, None], columns]
-        cells[~exists] = -1
-        # the first ``half`` filled cells in that order (a stable sort moves empty cells last)
-        first = np.argsort(cells < 0, axis=1, kind="stable")[:, :half]
-        rows = np.take_along_axis(cells, first, axis=1)
-        reach = np.linalg.norm(cloud.take(np.maximum(rows, 0), axis=0) - q[:, None, :], axis=2).max(axis=1)
-        reach[(rows < 0).any(axis=1)] = np.inf
-        nearer = reach < best_reach
-        best_rows[nearer], best_reach[nearer] = rows[nearer], reach[nearer]
-    accept = best_reach <= max_distance_m
-    idx[one_ring[accept], k - half:] = best_rows[accept]
-    widened[one_ring[accept]] = True
-    return idx, widened
+    # (one compiled pass over the neighbourhoods: ``kernels.adjacent_ring_neighbourhoods`` has the rule)
+    return adjacent_ring_neighbourhoods(np.ascontiguousarray(cloud, dtype=np.float64), rings, image,
+                                        np.ascontiguousarray(query_points, dtype=np.float64), idx,
+                                        float(max_distance_m))

@@ -106,3 +106,55 @@ def test_widening_keeps_two_ring_neighbourhoods_and_respects_the_distance():
     gap = 0.5
     wide, widened = widen_one_ring_neighbourhoods(points, rings, far, idx, RINGS, COLUMNS, max_distance_m=gap)
     assert not widened.any() and np.array_equal(wide, idx)
+
+
+def widened_by_numpy(cloud, rings, query_points, idx, n_rings, n_columns, max_distance_m):
+    """The rule of ``kernels.adjacent_ring_neighbourhoods``, written with numpy arrays (the reference)."""
+    idx = np.array(idx, dtype=np.intp)
+    m, k = idx.shape
+    half = k // 2
+    own = rings[idx]
+    one_ring = np.flatnonzero(np.all(own == own[:, :1], axis=1))
+    widened = np.zeros(m, dtype=bool)
+    if half == 0:
+        return idx, widened
+    image = range_image(rings, cloud, n_rings, n_columns)
+    q = query_points[one_ring]
+    offsets = np.array([0] + [s * i for i in range(1, half + 1) for s in (-1, 1)])
+    columns = (azimuth_columns(q, n_columns)[:, None] + offsets[None, :]) % n_columns
+    best_rows = np.zeros((len(one_ring), half), dtype=np.intp)
+    best_reach = np.full(len(one_ring), np.inf)
+    for step in (-1, 1):
+        adjacent = own[one_ring, 0] + step
+        exists = (adjacent >= 0) & (adjacent < n_rings)
+        cells = image[np.clip(adjacent, 0, n_rings - 1)[:, None], columns]
+        cells[~exists] = -1
+        first = np.argsort(cells < 0, axis=1, kind="stable")[:, :half]  # the first filled cells in that order
+        rows = np.take_along_axis(cells, first, axis=1)
+        reach = np.linalg.norm(cloud[np.maximum(rows, 0)] - q[:, None, :], axis=2).max(axis=1)
+        reach[(rows < 0).any(axis=1)] = np.inf
+        nearer = reach < best_reach
+        best_rows[nearer], best_reach[nearer] = rows[nearer], reach[nearer]
+    accept = best_reach <= max_distance_m
+    idx[one_ring[accept], k - half:] = best_rows[accept]
+    widened[one_ring[accept]] = True
+    return idx, widened
+
+
+@pytest.mark.parametrize("k", [12, 7, 1])
+def test_the_compiled_widening_is_the_numpy_rule(k):
+    """On a scan with holes (dropped returns: cells missing on the adjacent rings) and queries near and far,
+    at the lowest and highest rings too, the compiled pass keeps and replaces the same neighbours."""
+    points, rings = ground_scan(columns=900)
+    rng = np.random.default_rng(8)
+    kept = rng.random(len(points)) > 0.2
+    points, rings = points[kept], rings[kept]
+    queries = points[::5] + rng.normal(0.0, 0.05, size=points[::5].shape)
+    idx = knn(points, queries, k)
+    wide, widened = widen_one_ring_neighbourhoods(points, rings, queries, idx, RINGS, 900, max_distance_m=3.0)
+    expected, expected_widened = widened_by_numpy(points, rings, queries, idx, RINGS, 900, 3.0)
+    np.testing.assert_array_equal(wide, expected)
+    np.testing.assert_array_equal(widened, expected_widened)
+    if k > 1:
+        one_ring = np.all(rings[idx] == rings[idx][:, :1], axis=1)
+        assert 0 < widened.sum() < one_ring.sum()  # some widened, some too far or without the cells
