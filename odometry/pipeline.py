@@ -896,11 +896,13 @@ class ScanInput(NamedTuple):
 # Scans prepared ahead by default (``register_frames``). Where a scan's preparation holds its normals and
 # NCF (scan-to-scan, about as long as its registration) two threads preparing the next two keep both cores
 # busy; one ahead left the registering thread waiting. Where it is a voxel grid and poles only (the map
-# variants: their normals are the map's) none: since the voxel grid got cheaper, one ahead slowed the
-# registering thread by about as much as it saved (100 city frames, 3 rounds: the default at 1.34x against
-# 1.28x KISS-ICP's time on hdl32e, 1.11x either way on salo32; README, "Benchmarks").
+# variants: their normals are the map's) one: with the registration's steps compiled, its ~5 ms a frame
+# beside the registration gained in each of five interleaved comparisons (100 city frames, 4-8 rounds:
+# the default at 0.90-0.91x against 0.92-0.93x KISS-ICP's time on hdl32e with one ahead and none, 0.76-0.80x
+# against 0.83x on salo32; two ahead no better; README, "Benchmarks"). (When more of the frame was Python,
+# one ahead slowed the registering thread by about as much as it saved.)
 PREFETCH_SCANS = 2
-PREFETCH_SCANS_WITHOUT_NORMALS = 0
+PREFETCH_SCANS_WITHOUT_NORMALS = 1
 # The environment variable that overrides both (a worker pool whose processes have a core each sets 0).
 PREFETCH_ENV = "SALO_PREFETCH_SCANS"
 
