@@ -516,6 +516,20 @@ def _probe(table_key: np.ndarray, table_id: np.ndarray, key: np.int64, shift: np
     return h
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _key_table(keys: np.ndarray, count: int, entries: int) -> tuple[np.ndarray, np.ndarray, np.uint64]:
+    """(keys, ids, shift) of an open-addressing table with room for ``entries`` keys, holding the first
+    ``count`` of the distinct int64 ``keys``, each with its position among them (``_probe`` finds them)."""
+    size, shift = _table_shift(entries)
+    table_key = np.empty(size, dtype=np.int64)
+    table_id = np.full(size, -1, dtype=np.int64)
+    for i in range(count):
+        h = _probe(table_key, table_id, keys[i], shift)
+        table_key[h] = keys[i]
+        table_id[h] = i
+    return table_key, table_id, shift
+
+
 @njit(cache=True, nogil=True)
 def _insert_keys(keys: np.ndarray, start: int, entries: int, table_key: np.ndarray, table_id: np.ndarray,
                  shift: np.uint64, first: np.ndarray, provisional: np.ndarray, k: int) -> tuple[int, int]:
@@ -552,13 +566,7 @@ def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     entries = min(n, 2048)
     r = k = 0
     while r < n:
-        size, shift = _table_shift(entries)
-        table_key = np.empty(size, dtype=np.int64)
-        table_id = np.full(size, -1, dtype=np.int64)
-        for i in range(k):
-            h = _probe(table_key, table_id, first[i], shift)
-            table_key[h] = first[i]
-            table_id[h] = i
+        table_key, table_id, shift = _key_table(first, k, entries)
         r, k = _insert_keys(keys, r, entries, table_key, table_id, shift, first, provisional, k)
         entries *= 2
     order = np.argsort(first[:k])
@@ -613,13 +621,7 @@ def within_reach_of_any(points: np.ndarray, keys: np.ndarray, reach_m: np.ndarra
     for c in range(slot.shape[0]):
         order[fill[slot[c]]] = c
         fill[slot[c]] += 1
-    size, shift = _table_shift(g)
-    table_key = np.empty(size, dtype=np.int64)
-    table_id = np.full(size, -1, dtype=np.int64)
-    for v in range(g):
-        h = _probe(table_key, table_id, distinct[v], shift)
-        table_key[h] = distinct[v]
-        table_id[h] = v
+    table_key, table_id, shift = _key_table(distinct, g, g)
     found = np.zeros(points.shape[0], dtype=np.bool_)
     for i in range(points.shape[0]):
         x, y, z, r = points[i, 0], points[i, 1], points[i, 2], reach_m[i]
