@@ -2,7 +2,7 @@
 
 The odometry's per-frame arrays are thousands of rows, not millions: a numpy
 expression over them costs more in its calls and temporaries than in its
-arithmetic (a frame of the default makes about 12,000 numpy calls). These
+arithmetic (a frame of the default made about 12,000 numpy calls before them). These
 kernels fuse the few hottest chains into one loop each; each one's docstring
 names the numpy expression it computes (the tests compare them). Compiled on
 first use and cached beside this file (``cache=True``), so a process pays the
