@@ -331,6 +331,11 @@ def test_redeskew_with_a_memo_of_the_last_one_gives_the_same_points():
         for a, b in zip(plain, memoed, strict=True):
             np.testing.assert_array_equal(a, b)
     assert np.array_equal(memo.twist, twists[-1]) and memo.scalars.shape == (300, 4)
+    # the memo is what the undo takes: scalars spoiled behind its back change the points
+    spoiled = RedeskewMemo(memo.twist, memo.fractions, memo.scalars * 1.01)
+    nxt = twists[-1] * 1.01
+    assert not np.array_equal(redeskew(memoed[0], None, t, twists[-1], nxt, 0.1, spoiled)[0],
+                              redeskew(memoed[0], None, t, twists[-1], nxt, 0.1)[0])
     kept = memo.scalars
     moved, _ = redeskew(p, None, t[::-1].copy(), twists[-1], twists[1], 0.1, memo)  # other times: computed anew
     np.testing.assert_array_equal(moved, redeskew(p, None, t[::-1].copy(), twists[-1], twists[1], 0.1)[0])

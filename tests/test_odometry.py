@@ -351,9 +351,20 @@ def test_the_standard_chain_in_one_compiled_pass_is_the_rejectors_one_by_one(cit
     import odometry.icp
 
     frames = slice(0, 12)
+    passes = []  # (which path each step took: the compiled pass is counted)
+    compiled = odometry.icp.standard_rejection_system
+
+    def counted(*args):
+        passes.append(len(args[3]))
+        return compiled(*args)
+
+    monkeypatch.setattr(odometry.icp, "standard_rejection_system", counted)
     fast = run_sequence(city_sequence, variant(name), frames=frames, prefetch=0)
+    assert len(passes) >= sum(d.iterations for d in fast.diagnostics[1:])  # every step after the first frame's
+    passes.clear()
     monkeypatch.setattr(odometry.icp, "standard_chain", lambda rejectors: None)
     slow = run_sequence(city_sequence, variant(name), frames=frames, prefetch=0)
+    assert not passes  # (one rejector after another)
     np.testing.assert_array_equal(np.stack(fast.poses), np.stack(slow.poses))
     assert [d.matches for d in fast.diagnostics] == [d.matches for d in slow.diagnostics]
     assert any("trimmed" in d.matches and d.matches["trimmed"] < d.matches["distance"] for d in fast.diagnostics)
