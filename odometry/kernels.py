@@ -74,9 +74,10 @@ def plane_gate(moved: np.ndarray, centre: np.ndarray, source_index: np.ndarray, 
 
     moved: (M, 3) source points at the current pose, m; centre: (3,) m; source_index, target_index: (m,)
     rows; normals: (m, 3) the target's normal at each match (nan: no plane); uncertain: (N,) bool per
-    target row (the NCF's verdict), or (0,): every plane is sure. The information is
+    target row (the NCF's verdict), or (0,): every plane is sure, and the information is not summed
+    (zeros: no verdict, nothing to restore). The information is
     ``odometry.constraints.constraint_information`` of the rows ``moved[source_index] - centre`` and
-    ``normals`` where sure, summed in row order (``odometry.icp.plane_gate``).
+    ``normals`` where sure, summed in row order (``odometry.icp.usable_planes``).
     """
     m = source_index.shape[0]
     plane = np.empty(m, dtype=np.bool_)
@@ -89,7 +90,7 @@ def plane_gate(moved: np.ndarray, centre: np.ndarray, source_index: np.ndarray, 
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         plane[i] = not math.isnan(nx)
         sure[i] = plane[i] and not (with_verdicts and uncertain[target_index[i]])
-        if sure[i]:
+        if sure[i] and with_verdicts:
             j = source_index[i]
             px, py, pz = moved[j, 0] - centre[0], moved[j, 1] - centre[1], moved[j, 2] - centre[2]
             J[0], J[1], J[2] = nx, ny, nz

@@ -51,12 +51,13 @@ PRUNE_STRIDE_M = 5.0
 # Key differences from a voxel to itself and its 26 neighbours (the map's normal cache checks them).
 _NEIGHBOUR_KEY_STEPS = neighbour_key_steps()
 
-def in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
-    """(N,) bool: which ``values`` are in the sorted array ``sorted_set`` (faster than np.isin here)."""
-    if len(sorted_set) == 0:
-        return np.zeros(len(values), dtype=bool)
-    pos = np.minimum(np.searchsorted(sorted_set, values), len(sorted_set) - 1)
-    return sorted_set[pos] == values
+def places_in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((N,) each value's place in the sorted array ``sorted_set`` (``searchsorted``), (N,) bool: it is there)."""
+    pos = np.searchsorted(sorted_set, values)
+    found = np.zeros(len(values), dtype=bool)
+    inside = pos < len(sorted_set)
+    found[inside] = sorted_set[pos[inside]] == values[inside]
+    return pos, found
 
 
 def rank_within_groups(sorted_keys: np.ndarray) -> np.ndarray:
@@ -247,7 +248,7 @@ class LocalMap:
         keys, points = keys[order], points.take(order, axis=0)
         if payload is not None:
             payload = payload[order]
-        pos, known = self._voxel_places(keys)
+        pos, known = places_in_sorted(keys, self._voxel_keys)
         held = np.zeros(len(keys), dtype=np.int64)
         held[known] = self._voxel_counts[pos[known]]
         accept = held + rank_within_groups(keys) < self.max_points_per_voxel
@@ -298,7 +299,7 @@ class LocalMap:
         far = np.einsum("ij,ij->i", d, d) > self.max_distance_m**2
         if not far.any():
             return self.points[:0]
-        drop = in_sorted(self._keys, self._voxel_keys[far])
+        _, drop = places_in_sorted(self._keys, self._voxel_keys[far])  # (faster than np.isin here)
         dropped_points = np.compress(drop, self.points, axis=0)
         self._voxel_keys, self._voxel_counts = self._voxel_keys[~far], self._voxel_counts[~far]
         kept = np.flatnonzero(~drop)
@@ -340,18 +341,10 @@ class LocalMap:
             forget[far] = d <= reach[far]
         self._known[rows[forget]] = False
 
-    def _voxel_places(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(K,) voxel keys -> ((K,) their places among the sorted occupied voxels, (K,) bool: occupied already)."""
-        pos = np.searchsorted(self._voxel_keys, keys)
-        occupied = np.zeros(len(keys), dtype=bool)
-        inside = pos < len(self._voxel_keys)
-        occupied[inside] = self._voxel_keys[pos[inside]] == keys[inside]
-        return pos, occupied
-
     def _count_in(self, keys: np.ndarray) -> None:
         """Add (K,) sorted voxel keys of points just inserted to the occupied voxels and their counts."""
         distinct, added = np.unique(keys, return_counts=True)
-        pos, held = self._voxel_places(distinct)
+        pos, held = places_in_sorted(distinct, self._voxel_keys)
         self._voxel_counts[pos[held]] += added[held]
         # (new voxels go in at their sorted places: one copy of the map's voxels, no sort of them)
         fresh = ~held

@@ -129,8 +129,10 @@ def test_plane_gate_is_the_plane_and_ncf_masks_and_the_sure_information():
     assert 0 < sure.sum() < plane.sum() < 700
     expected = kernels.constraint_information(moved[source_index] - centre, normals, np.flatnonzero(sure), 12.0)
     np.testing.assert_array_equal(H, expected)
-    plane, every, _ = kernels.plane_gate(moved, centre, source_index, target_index, normals, np.zeros(0, bool), 12.0)
-    np.testing.assert_array_equal(every, plane)  # no verdicts: every plane is sure
+    plane, every, none = kernels.plane_gate(moved, centre, source_index, target_index, normals, np.zeros(0, bool),
+                                            12.0)
+    np.testing.assert_array_equal(every, plane)  # no verdicts: every plane is sure, and no information summed
+    assert not none.any()
 
 
 def test_standard_rejection_system_is_the_rejector_chain_and_its_system():
