@@ -93,11 +93,7 @@ def plane_gate(moved: np.ndarray, centre: np.ndarray, source_index: np.ndarray, 
         if sure[i] and with_verdicts:
             j = source_index[i]
             px, py, pz = moved[j, 0] - centre[0], moved[j, 1] - centre[1], moved[j, 2] - centre[2]
-            J[0], J[1], J[2] = nx, ny, nz
-            J[3], J[4], J[5] = (py * nz - pz * ny) * inv_L, (pz * nx - px * nz) * inv_L, (px * ny - py * nx) * inv_L
-            for a in range(6):
-                for b in range(a, 6):
-                    H[a, b] += J[a] * J[b]
+            _add_constraint_row(H, J, px, py, pz, nx, ny, nz, inv_L)
     _mirror_upper(H)
     return plane, sure, H
 
@@ -174,17 +170,21 @@ def constraint_information(points: np.ndarray, normals: np.ndarray, rows: np.nda
     J = np.empty(6)
     inv_L = 1.0 / rotation_scale_m
     for i in rows:
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        J[0], J[1], J[2] = nx, ny, nz
-        J[3], J[4], J[5] = (py * nz - pz * ny) * inv_L, (pz * nx - px * nz) * inv_L, (px * ny - py * nx) * inv_L
-        for a in range(6):
-            for b in range(a, 6):
-                H[a, b] += J[a] * J[b]
-    for a in range(6):
-        for b in range(a):
-            H[a, b] = H[b, a]
+        _add_constraint_row(H, J, points[i, 0], points[i, 1], points[i, 2], normals[i, 0], normals[i, 1],
+                            normals[i, 2], inv_L)
+    _mirror_upper(H)
     return H
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_constraint_row(H: np.ndarray, J: np.ndarray, px: float, py: float, pz: float, nx: float, ny: float,
+                        nz: float, inv_L: float) -> None:
+    """Add one point's scaled row ``J = [n, (p x n) / L]``'s ``J^T J`` to H (upper triangle)."""
+    J[0], J[1], J[2] = nx, ny, nz
+    J[3], J[4], J[5] = (py * nz - pz * ny) * inv_L, (pz * nx - px * nz) * inv_L, (px * ny - py * nx) * inv_L
+    for a in range(6):
+        for b in range(a, 6):
+            H[a, b] += J[a] * J[b]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
