@@ -366,5 +366,5 @@ def test_the_blocks_marked_to_run_run_as_written(block, tmp_path):
         assert done.returncode == 0, f"{block}: {line}\n{done.stderr[-2000:]}"
     if block.page.name == "README.md":  # what the first steps say they write
         for path in ("seqs/city1/manifest.json", "city1.png", "out/city1/salo-map/poses.txt", "city1-eval.png",
-                     "out/bench/ci-example/leaderboard.html"):
+                     "out/bench/suite/leaderboard.html"):
             assert (work / path).is_file(), path
