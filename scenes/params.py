@@ -11,6 +11,7 @@ naming the scene and the parameter. Rules between parameters live in a scene's
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +33,10 @@ class CommonParams(Params):
     lateral_accel_m_s2: float = param(
         2.0, "lateral acceleration allowed in turns (slows the vehicle in curves)", min=0.1, max=10.0
     )
+    accel_smoothing_s: float = param(
+        0.0, "length of a triangular moving average over the speed profile, which makes the acceleration and the "
+        "jerk continuous (what an IMU needs; the motion lags the raw profile by half of it) (0: off, the "
+        "acceleration steps)", min=0.0, max=5.0)
     mount_height_m: float = param(1.9, "lidar height above the road (roof mount)", min=0.3, max=5.0)
     suspension_pitch_deg: float = param(
         0.3, "amplitude of the body's pitch/roll oscillation at cruise speed", min=0.0, max=5.0
@@ -39,6 +44,13 @@ class CommonParams(Params):
     suspension_heave_m: float = param(0.01, "amplitude of the body's vertical oscillation at cruise speed",
                                       min=0.0, max=0.2)
     max_triangles: int = param(1_000_000, "face budget: building a larger mesh is an error", min=1000)
+
+
+def default_of(cls: type[CommonParams], name: str, default: Any) -> Any:
+    """A field declaring ``cls``'s parameter ``name`` again with another default (help, bounds kept): a
+    scene that is another's with other defaults (``scenes.bare_tunnel``)."""
+    declared = {f.name: f for f in dataclasses.fields(cls)}[name]
+    return dataclasses.field(default=default, metadata=declared.metadata)
 
 
 def resolve(cls: type[CommonParams], overrides: dict[str, Any] | None = None,
@@ -67,4 +79,4 @@ def scene_section(name: str, cls: type[CommonParams], description: str = "") -> 
     return Section(name, tuple(describe(cls)), description, cls)
 
 
-__all__ = ["CommonParams", "ParamError", "ParamInfo", "describe", "param", "resolve", "scene_section"]
+__all__ = ["CommonParams", "ParamError", "ParamInfo", "default_of", "describe", "param", "resolve", "scene_section"]
