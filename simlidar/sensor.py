@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from paramspec import Param, ParamError, Params, Section, param, schema
+from paramspec import Param, ParamError, Params, Section, param, schema, section
 
+from .imu import ImuModel
 from .yaml_file import read_yaml
 
 
@@ -98,6 +99,7 @@ class LidarModel(Params):
                                               "to this factor (1: off)", min=1.0)
     intensity_incidence_exponent: float = param(1.0, "k in intensity = reflectance x |cos incidence|^k x falloff "
                                                 "(1: Lambertian)", min=0.0)
+    imu: ImuModel = section(ImuModel)
     description: str = param("", "free text")
     source: str = param("", "where the figures come from")
 
@@ -220,7 +222,7 @@ class LidarModel(Params):
             "intensity_range_ref_m": self.intensity_range_ref_m,
         }
         # The effects below are written only when on, so that files of sensors without them stay as they were.
-        defaults = {p.name: p.default for p in schema(LidarModel).members}
+        defaults = {p.name: p.default for p in schema(LidarModel).members if isinstance(p, Param)}
         for key in ("beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m",
                     "incidence_noise_max_factor", "intensity_incidence_exponent"):
             if getattr(self, key) != defaults[key] or (key in ("beam_subrays", "return_mode", "echo_separation_m")
@@ -228,6 +230,8 @@ class LidarModel(Params):
                 out[key] = getattr(self, key)
         if self.azimuth_offsets_deg is not None:
             out["azimuth_offsets_deg"] = list(self.azimuth_offsets_deg)
+        if self.imu.enabled:  # the IMU's keys, all of them, only when it is on
+            out["imu"] = self.imu.to_dict()
         if self.description:
             out["description"] = self.description
         if self.source:
@@ -268,7 +272,7 @@ def _file_keys() -> Section:
              angles, pitch, lowest, "azimuth_offsets_deg", "laser_interval_s", "start_azimuth_deg",
              "ring_bias_std_m", "angular_jitter_deg", "dropout_probability", "intensity_range_ref_m",
              "beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m", "incidence_noise_max_factor",
-             "intensity_incidence_exponent", "description", "source"]
+             "intensity_incidence_exponent", "imu", "description", "source"]
     members = tuple(model[k] if isinstance(k, str) else k for k in order)
     return Section("sensor", members, "a spinning lidar's rings, timing, ranges and noise", LidarModel)
 
