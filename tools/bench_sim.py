@@ -188,15 +188,15 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
 
         with_imu = sensor.with_overrides(imu=dataclasses.replace(sensor.imu, enabled=True))
         with tempfile.TemporaryDirectory(dir=tmp_root) as tmp:
-            c0, t0 = time.process_time(), time.perf_counter()
+            c_on, t_on = time.process_time(), time.perf_counter()
             simulate_scene(scene, with_imu, Path(tmp) / "seq", frames, seed=seed)
-            cpu_imu, wall_imu = time.process_time() - c0, time.perf_counter() - t0
+            cpu_imu, wall_imu = time.process_time() - c_on, time.perf_counter() - t_on
             imu_bytes = sum((Path(tmp) / "seq" / f).stat().st_size for f in ("imu.csv", "imu_truth.csv"))
         from simlidar.imu import simulate_imu
 
-        c0 = time.process_time()
+        c_on = time.process_time()
         simulate_imu(scene.trajectory, with_imu.imu, 0.0, frames * sensor.sweep_period_s, seed)
-        cpu_model = time.process_time() - c0
+        cpu_model = time.process_time() - c_on
         print(f"  with the IMU on ({with_imu.imu.update_rate:g} Hz): CPU per sweep {1e3 * cpu_imu / frames:.0f} ms, "
               f"{cpu_imu / cpu_sim:.3f}x the run with it off (wall {wall_imu / (t_end - t0):.3f}x); the IMU's "
               f"samples alone {1e3 * cpu_model:.0f} ms for the {frames * sensor.sweep_period_s:g} s; "
