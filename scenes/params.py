@@ -35,8 +35,8 @@ class CommonParams(Params):
     )
     accel_smoothing_s: float = param(
         0.0, "length of a triangular moving average over the speed profile, which makes the acceleration and the "
-        "jerk continuous (what an IMU needs; the motion lags the raw profile by half of it) (0: off, the "
-        "acceleration steps)", min=0.0, max=5.0)
+        "jerk continuous, and the body's pitch and roll response a cubic spline (what an IMU needs; the motion "
+        "lags the raw profile by half of it) (0: off, the poses as they always were)", min=0.0, max=5.0)
     mount_height_m: float = param(1.9, "lidar height above the road (roof mount)", min=0.3, max=5.0)
     suspension_pitch_deg: float = param(
         0.3, "amplitude of the body's pitch/roll oscillation at cruise speed", min=0.0, max=5.0

@@ -16,19 +16,21 @@ to interpolate):
   of the road surface under the wheels (when the scene gives its height);
 - body motion: squat under acceleration, dive under braking, roll outward in
   turns (through a critically damped 1 Hz body mode, so the attitude lags the
-  accelerations and settles after a stop; its response, computed every 10 ms, is
-  a cubic spline in time, so the attitude is C2), and a small seeded oscillation
-  of heave, pitch and roll (suspension modes near 1.2-1.8 Hz) that scales with speed;
+  accelerations and settles after a stop; its response is computed every 10 ms and
+  interpolated linearly, or with smoothing by a cubic spline, so the attitude is C2),
+  and a small seeded oscillation of heave, pitch and roll (suspension modes near
+  1.2-1.8 Hz) that scales with speed;
 - the lidar sits ``mount_height_m`` above the road along the body's z axis.
 
 ``kinematics_at`` gives the exact first and second derivatives of ``pose_at``
 (velocity, acceleration, body angular velocity and acceleration): what an IMU
-riding on the vehicle measures (``simlidar.imu``). Where they are not continuous:
-without smoothing the acceleration steps wherever the raw profile's does, and the
-oscillation's speed scaling then makes the angular rate, and the lidar's velocity
-through the mount's lever, step by under 2 mm/s (see ``docs/imu.md``); the spline's
-third derivative steps at its knots, so the angular acceleration steps (finitely)
-in curves.
+riding on the vehicle measures (``simlidar.imu``). Where they are not continuous
+(``docs/imu.md`` measures each): without smoothing the acceleration steps wherever
+the raw profile's does, the oscillation's speed scaling then makes the angular rate,
+and the lidar's velocity through the mount's lever, step by under 2 mm/s, and the
+body mode's rate steps every 10 ms (its impulses are left out of the acceleration);
+with or without, the path spline's third derivative steps at its knots, so the
+angular acceleration steps (finitely) in curves.
 
 Frames: lidar x forward, y left, z up; poses are ``T_world_lidar`` (4, 4).
 """
@@ -212,8 +214,13 @@ class PathTrajectory:
         w = 2 * np.pi * BODY_MODE_HZ
         kernel = w**2 * tau * np.exp(-w * tau) * BODY_DT_S  # unit gain at steady state
         self._tb = tb
-        self._pitch_dyn = CubicSpline(tb, -PITCH_PER_ACCEL_RAD * np.convolve(a_long, kernel)[: len(tb)])
-        self._roll_dyn = CubicSpline(tb, ROLL_PER_LAT_ACCEL_RAD * np.convolve(a_lat, kernel)[: len(tb)])
+        self._pitch_dyn = -PITCH_PER_ACCEL_RAD * np.convolve(a_long, kernel)[: len(tb)]
+        self._roll_dyn = ROLL_PER_LAT_ACCEL_RAD * np.convolve(a_lat, kernel)[: len(tb)]
+        # Smoothed motion: the response is a cubic spline (C2 attitude); raw: linear between the 10 ms samples,
+        # as the poses have always been (a spline would move them by up to 9 um and 5 urad)
+        self._body_splines = None
+        if self.accel_smoothing_s > 0:
+            self._body_splines = {id(table): CubicSpline(tb, table) for table in (self._pitch_dyn, self._roll_dyn)}
 
         # Suspension oscillation: two modes per axis with seeded frequency and phase.
         rng = np.random.default_rng([int(seed), 0x5A5])
@@ -290,10 +297,20 @@ class PathTrajectory:
                             else np.atleast_1d(distance_m))
 
     # ---------------------------------------------------------------- poses
-    def _body(self, spline: CubicSpline, t: np.ndarray, nu: int = 0) -> np.ndarray:
-        """The body mode's response (or its nu-th derivative) at times t; zero outside its table (settled)."""
-        inside = (t >= self._tb[0]) & (t <= self._tb[-1])
-        return np.where(inside, spline(np.clip(t, self._tb[0], self._tb[-1]), nu), 0.0)
+    def _body(self, table: np.ndarray, t: np.ndarray, nu: int = 0) -> np.ndarray:
+        """The body mode's response (table: its samples every ``BODY_DT_S``) or its nu-th derivative at times t:
+        the cubic spline through the samples with smoothing, else linear between them (nu = 1: the segment's
+        slope; nu = 2: zero, the impulses at the samples left out); zero outside the table (settled)."""
+        tb = self._tb
+        inside = (t >= tb[0]) & (t <= tb[-1])
+        if self._body_splines is not None:
+            return np.where(inside, self._body_splines[id(table)](np.clip(t, tb[0], tb[-1]), nu), 0.0)
+        if nu == 0:
+            return np.interp(t, tb, table, left=0.0, right=0.0)
+        if nu == 1:
+            k = np.clip(np.searchsorted(tb, t, side="right") - 1, 0, len(tb) - 2)
+            return np.where(inside, (table[k + 1] - table[k]) / (tb[k + 1] - tb[k]), 0.0)
+        return np.zeros_like(t)
 
     def _oscillation(self, t: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(n,) times and speeds -> (n, 3) heave (m), pitch and roll (rad) of the suspension's oscillation."""
