@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from paramspec import Param, ParamError, Params, Section, build, param, schema
 
@@ -44,6 +44,19 @@ class CommonParams(Params):
     suspension_heave_m: float = param(0.01, "amplitude of the body's vertical oscillation at cruise speed",
                                       min=0.0, max=0.2)
     max_triangles: int = param(1_000_000, "face budget: building a larger mesh is an error", min=1000)
+
+    # Parameters added after sequences were made and cached: ``to_dict`` (a scene's ``params``, a manifest's
+    # ``scene_params``, a sweep's cache key) writes them only when they differ from their default, so that what
+    # was made before keeps its keys (a sensor file's effects follow the same rule).
+    written_when_set: ClassVar[tuple[str, ...]] = ("accel_smoothing_s",)
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for key in self.written_when_set:
+            if out[key] == defaults[key]:
+                del out[key]
+        return out
 
 
 def default_of(cls: type[CommonParams], name: str, default: Any) -> Any:

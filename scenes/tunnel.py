@@ -63,6 +63,8 @@ class Params(CommonParams):
     stop_wait_s: float = param(0.0, "the vehicle brakes to a stop at the tunnel's middle and waits this long before "
                                "driving on (0: no stop)", min=0.0, max=600.0)
 
+    written_when_set = (*CommonParams.written_when_set, "bare_length_m", "stop_wait_s")
+
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.curve_radius_m and self.curve_radius_m < 100.0:
