@@ -231,10 +231,12 @@ def run_command(template: str, staged, log_path: str | Path, timeout_s: float = 
                 workdir: str | Path | None = None) -> float:
     """Run an external odometry over a staged input through the shell; its output goes to ``log_path``.
 
-    workdir: where it runs (default: here). Returns its wall time, s. Raises
-    MethodError (quoting the command's last lines) on a non-zero exit, a timeout or
-    no poses written.
+    workdir: where it runs (default: the stage's empty ``work`` folder, ``tools.isolation``).
+    Returns its wall time, s. Raises MethodError (quoting the command's last lines) on a non-zero
+    exit, a timeout or no poses written.
     """
+    from tools.isolation import method_environment
+
     command = fill_command(template, staged.placeholders())
     staged.out.unlink(missing_ok=True)
     log_path = Path(log_path)
@@ -242,10 +244,10 @@ def run_command(template: str, staged, log_path: str | Path, timeout_s: float = 
     with open(log_path, "w") as log_file:
         log_file.write(f"$ {command}\n")
         log_file.flush()
-        cwd = workdir if workdir is not None and Path(workdir).is_dir() else None
+        cwd = workdir if workdir is not None and Path(workdir).is_dir() else staged.workdir
         try:
             proc = subprocess.run(command, shell=True, cwd=cwd, stdout=log_file, stderr=subprocess.STDOUT,
-                                  timeout=timeout_s, stdin=subprocess.DEVNULL)
+                                  timeout=timeout_s, stdin=subprocess.DEVNULL, env=method_environment(cwd))
         except subprocess.TimeoutExpired:
             raise MethodError(f"external odometry timed out after {timeout_s:g} s: {command}") from None
     seconds = time.perf_counter() - t0
@@ -309,7 +311,8 @@ def plugin_entry_points() -> dict:
     return {ep.name: ep for ep in entry_points(group=PLUGIN_GROUP)}
 
 
-def _load_plugin(entry_point) -> Method:
+def load_plugin(entry_point) -> Method:
+    """The ``Method`` an entry point of ``PLUGIN_GROUP`` names (a function becomes a ``FunctionMethod``)."""
     try:
         obj = entry_point.load()
     except Exception as exc:  # noqa: BLE001 - any import error of a third-party package: say which
@@ -317,12 +320,15 @@ def _load_plugin(entry_point) -> Method:
                           f"{type(exc).__name__}: {exc}") from None
     version = entry_point.dist.version if getattr(entry_point, "dist", None) is not None else None
     if isinstance(obj, Method):
-        return obj
-    if isinstance(obj, type) and issubclass(obj, Method):
-        return obj()
-    if callable(obj):
-        return FunctionMethod(entry_point.name, obj, entry_point.value, version)
-    raise MethodError(f"plug-in {entry_point.name} ({entry_point.value}) is neither a function nor a Method")
+        method = obj
+    elif isinstance(obj, type) and issubclass(obj, Method):
+        method = obj()
+    elif callable(obj):
+        method = FunctionMethod(entry_point.name, obj, entry_point.value, version)
+    else:
+        raise MethodError(f"plug-in {entry_point.name} ({entry_point.value}) is neither a function nor a Method")
+    method.entry_point = entry_point.name  # run_method_staged runs it in a process of its own (tools.isolation)
+    return method
 
 
 # ---------------------------------------------------------------- names
@@ -371,7 +377,7 @@ def method_from_name(name: str, overrides: dict | None = None) -> Method:
         return PeerMethod(name)
     plugins = plugin_entry_points()
     if name in plugins:
-        return _load_plugin(plugins[name])
+        return load_plugin(plugins[name])
     known = known_names()
     listing = "; ".join(f"{kind}: {', '.join(names) or '(none installed)'}" for kind, names in known.items())
     raise MethodError(f"unknown method {name!r} ({listing}; an external program: a command with {{scans}} and "
@@ -383,13 +389,24 @@ def run_method_staged(method: Method, sequence, *, fields=None, workdir=None, lo
     """Stage ``sequence`` (``tools.staging.staged``: no ground truth) and run ``method`` on it.
 
     A sequence in memory goes to an in-process method as ``tools.staging.sensor_view``
-    (nothing written); a program gets it staged on disk as always.
+    (nothing written); a program gets it staged on disk as always, and so does a plug-in of
+    ``PLUGIN_GROUP``, run in a process of its own (``tools.isolation``).
     """
     from tools.staging import DEFAULT_FIELDS, sensor_view, staged
 
     reason = method.unavailable()
     if reason:
         raise MethodError(f"{method.label}: {reason}")
+    if getattr(method, "entry_point", None) is not None:  # a plug-in: in a process of its own
+        from tools.isolation import IsolatedRunError, run_plugin_isolated
+
+        with staged(sequence, DEFAULT_FIELDS if fields is None else fields) as stage:
+            try:
+                got = run_plugin_isolated(method.entry_point, method.name, stage, log_path=log_path,
+                                          timeout_s=timeout_s)
+            except IsolatedRunError as exc:
+                raise MethodError(str(exc)) from None
+        return MethodOutput(got.poses, got.seconds, got.degenerate, None, got.settings, got.note)
     in_process = type(method).run_sequence is not Method.run_sequence
     if in_process and getattr(sequence, "kind", None) == "memory":
         view = sensor_view(sequence, DEFAULT_FIELDS if fields is None else fields)
@@ -400,5 +417,5 @@ def run_method_staged(method: Method, sequence, *, fields=None, workdir=None, lo
 
 __all__ = ["DEFAULT_COMMAND_TIMEOUT_S", "LABELS", "PLACEHOLDERS", "PLUGIN_GROUP", "CommandMethod", "FunctionMethod",
            "Method", "MethodError", "MethodOutput", "OursMethod", "PeerMethod", "builtin_names", "check_command",
-           "command_problem", "fill_command", "known_names", "method_from_name", "method_label", "our_config",
-           "plugin_entry_points", "run_command", "run_method_staged"]
+           "command_problem", "fill_command", "known_names", "load_plugin", "method_from_name", "method_label",
+           "our_config", "plugin_entry_points", "run_command", "run_method_staged"]
