@@ -81,14 +81,15 @@ def cmd_odometry(args) -> int:
         from simlidar.formats.scan_folders import KITTI_SENSOR
 
         print(f"sensor: {KITTI_SENSOR} (KITTI's; --sensor to change)")
-    frames = parse_frames(args.frames)
+    frames = parse_frames(args.frames, len(seq), str(args.sequence))
     out = args.out or Path("out") / args.sequence.resolve().name / config.name / "poses.txt"
     files = RunFiles.beside(out, tum=args.tum)
     bar = progress_bar(frames_selected(len(seq), frames), "frame", f"odometry {config.name}")
     try:
         result = run_method(seq, config, frames=frames, on_frame=lambda k, d: bar.update(1), files=files)
     except OdometryError as exc:
-        raise CommandError(f"{args.sequence}: {exc}") from None
+        text = str(exc)  # the odometry's errors name the sequence already, most of them
+        raise CommandError(text if text.startswith(str(args.sequence)) else f"{args.sequence}: {text}") from None
     finally:
         bar.close()
     stretches = degenerate_stretches(result.run.diagnostics)
