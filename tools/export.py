@@ -218,7 +218,7 @@ def export_tum(seq, out: str | Path, frames: slice | None = None, *, force: bool
     """Write the ground-truth trajectory in TUM format (see the module doc)."""
     out = Path(out)
     if out.exists() and not force:
-        raise ExportError(f"{out}: already exists (use --force to replace it)")
+        raise ExportError(f"{out}: already exists (replace it with --force, or force=True in Python)")
     if seq.poses is None:
         raise ExportError(f"{seq.path}: no ground-truth poses to write as a trajectory")
     idx = frame_indices(seq, frames)

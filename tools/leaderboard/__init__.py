@@ -152,7 +152,6 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
                       history: list, pages: dict[str, Path] | None = None) -> dict[str, Path]:
     """The figures, ``leaderboard.md`` and ``leaderboard.html`` into ``out``; pages: each sequence's 3D view."""
     from odometry.config import DEFAULT_VARIANT
-    from simlidar.dataset import open_sequence
     from tools.degenerate import TRUTH_THRESHOLD, diagnostics_constraints, truth_constraints
     from tools.experiments.report import html_page
 
@@ -170,9 +169,15 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
     lines += ["",
              "Every method ran on the sensor's data only (scans, per-point ring and time unless the kind says "
              "otherwise, the sensor model, times), without the ground truth. Figures are means over a family's "
-             "sequences: KITTI t_err and r_err over 50-200 m segments, the SE(3)-aligned ATE, the frame-to-frame "
-             "RPE, the vertical drift (|end height error| / distance); a failure is a failed run, a divergence "
-             "or t_err above 10 % (counted; its figures stay in the means when it has them). Best figure in bold.", ""]
+             "sequences: KITTI t_err and r_err over 50-200 m segments; beside t_err, the relative error over "
+             "10 m and 50 m windows (every frame a start, so short sequences have one too); the SE(3)-aligned "
+             "ATE, the frame-to-frame RPE, the vertical drift (|end height error| / distance); the error along "
+             "the truth's weakest direction over its weakly constrained stretches (accumulated over each "
+             "stretch, projected on its weakest direction, over the distance they span; n/a where the truth "
+             "has no weak stretch); the success rate: runs without a failure (a failed run, a divergence or "
+             "t_err above 10 %; a failed run's figures stay in the means when it has them). Best figure in "
+             "bold.", ""]
+    truths = _add_environment_figures(out, sequences, results)
     families = list(dict.fromkeys(s.family for s in sequences))
     for family in families:
         ids = {s.id for s in sequences if s.family == family}
@@ -193,8 +198,7 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
               "the frames each method flagged itself (ours: degenerate or prior kept).", ""]
     outputs = {}
     for s in sequences:
-        seq = open_sequence(s.path)
-        gt = np.asarray(seq.poses)
+        gt = truths[s.id]
         est, own = {}, {}
         for m in methods:
             r = next((x for x in results if x["method"] == m.name and x["sequence"] == s.id), None)
@@ -233,6 +237,25 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
     atomic_write_text(out / "leaderboard.html", html_page(markdown, f"salo bench: {suite}", out))
     outputs.update(markdown=out / "leaderboard.md", html=out / "leaderboard.html")
     return outputs
+
+
+def _add_environment_figures(out: Path, sequences: list[BenchSequence], results: list[dict]) -> dict:
+    """Each finished result's ``environment`` figures, added to its figures (computed from its poses, so a
+    result stored by an earlier bench has them too); the true poses of each sequence, by id."""
+    from simlidar.dataset import open_sequence
+    from tools.degenerate import truth_constraints
+
+    from .environment import environment_figures
+
+    truths = {}
+    for s in sequences:
+        truths[s.id] = gt = np.asarray(open_sequence(s.path).poses)
+        stretches = truth_constraints(s.path).stretches() if (s.path / "degeneracy.csv").is_file() else None
+        for r in results:
+            if r["sequence"] == s.id and r["status"] == "ok":
+                est = _read_nan_poses(result_dir(out, r["method"], s.id) / "poses.txt")
+                r["figures"] = {**r["figures"], **environment_figures(gt, est, stretches)}
+    return truths
 
 
 def _link(out: Path, page: Path) -> str:
