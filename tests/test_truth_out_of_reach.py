@@ -169,3 +169,29 @@ def test_the_cheat_finds_the_truth_from_a_link_into_a_sequence_folder(tmp_path):
     shutil.copyfile(seq / "velodyne" / "000000.bin", clean / "velodyne" / "000000.bin")
     result = truth_cheat.search([str(clean / "velodyne")], {}, str(clean))
     assert not [f for f in result["found"] if _holds_truth(f, truths)]
+
+
+def test_a_command_runs_in_a_folder_of_its_own_and_a_relative_path_gets_a_hint(tmp_path, monkeypatch):
+    from simlidar.sensor import load_sensor
+    from tools.methods import CommandMethod, MethodError, run_method_staged
+    from tools.runners import simulate_scene
+    from tools.worlds import build_scene_world
+
+    seq = simulate_scene(build_scene_world("city", 0, {"speed_m_s": 8.0}), load_sensor("vlp16"), tmp_path / "seq",
+                         2, seed=0, start_s=4.0).path
+    (tmp_path / "bin").mkdir()
+    script = tmp_path / "bin" / "where.py"  # writes the identity poses and the folder it runs in
+    script.write_text("import os, sys\nopen(sys.argv[1], 'w').write('1 0 0 0 0 1 0 0 0 0 1 0\\n' * 2)\n"
+                      "print('cwd', os.getcwd(), 'PWD', os.environ.get('PWD'), 'OLDPWD', os.environ.get('OLDPWD'))\n")
+    monkeypatch.chdir(tmp_path)  # the caller's folder holds the sequence, truth included
+    monkeypatch.setenv("OLDPWD", str(tmp_path / "seq"))
+    from simlidar.dataset import open_sequence
+
+    run_method_staged(CommandMethod("where", f"{sys.executable} {script} {{out}} # {{scans}}"), open_sequence(seq),
+                      log_path=tmp_path / "where.log")
+    words = (tmp_path / "where.log").read_text().split()
+    cwd, pwd, oldpwd = words[words.index("cwd") + 1], words[words.index("PWD") + 1], words[-1]
+    assert cwd == pwd and Path(cwd).name == "work" and "salo-input-" in cwd and oldpwd == "None"
+    with pytest.raises(MethodError, match=r"runs in a folder of its own.*give bin/where.py by an absolute path"):
+        run_method_staged(CommandMethod("rel", f"{sys.executable} bin/where.py {{out}} # {{scans}}"),
+                          open_sequence(seq), log_path=tmp_path / "rel.log")

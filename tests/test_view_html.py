@@ -152,3 +152,42 @@ def test_the_page_is_one_file_that_needs_no_network(run_dir, tmp_path):
     data = json.loads(re.search(r'<script id="salo-data" type="application/json">(.*?)</script>', text,
                                 re.S).group(1).replace("<\\/", "</"))
     assert data["frames"] == 2 and data["truth"] is not None and data["tracks"] == []
+
+
+@pytest.mark.slow
+def test_a_bench_page_shows_ours_and_a_peer_side_by_side(tmp_path, monkeypatch):
+    """The bench writes a page per sequence, linked from the leaderboard; ours and KISS-ICP side by side.
+
+    With SALO_SCREENSHOT_DIR set, the screenshot is kept there (docs/images/ holds one).
+    """
+    import os
+    import shutil
+
+    import yaml
+    from PIL import Image
+
+    from tools.experiments.peer import peer_unavailable_reason
+    from tools.leaderboard import run_bench
+    from tools.methods import method_from_name
+
+    browser.chromium()
+    why = peer_unavailable_reason("kiss-icp")
+    if why:
+        pytest.skip(f"kiss-icp: {why} (pip install -e '.[peer]')")
+    suite = tmp_path / "tiny.yaml"
+    suite.write_text(yaml.safe_dump({"name": "tiny", "scenes": ["city"], "sensors": ["vlp16"], "frames": 8,
+                                     "speed_m_s": 8.0, "start_s": 4.0}))
+    result = run_bench(suite, [method_from_name("default"), method_from_name("kiss-icp")], tmp_path / "bench")
+    (seq,) = result.sequences
+    page = result.outputs[f"view {seq.id}"]
+    assert page == tmp_path / "bench" / "views" / f"{seq.id}.html"
+    assert f"(views/{seq.id}.html)" in (tmp_path / "bench" / "leaderboard.md").read_text()
+    assert f'href="views/{seq.id}.html"' in (tmp_path / "bench" / "leaderboard.html").read_text()
+    png = tmp_path / "bench-side-by-side.png"
+    _, console = browser.run(page.as_uri() + "#frame=7", tmp_path / "profile", f"--screenshot={png}")
+    assert console == []
+    pixels = np.asarray(Image.open(png).convert("RGB")).astype(int)[140:600]
+    saturated = (pixels.max(axis=2) - pixels.min(axis=2)) > 60
+    assert saturated[:, :700].mean() > 0.01 and saturated[:, 700:].mean() > 0.01  # points in both halves
+    if os.environ.get("SALO_SCREENSHOT_DIR"):
+        shutil.copy(png, Path(os.environ["SALO_SCREENSHOT_DIR"]) / png.name)

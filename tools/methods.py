@@ -253,10 +253,26 @@ def run_command(template: str, staged, log_path: str | Path, timeout_s: float = 
     seconds = time.perf_counter() - t0
     if proc.returncode != 0:
         tail = " | ".join(log_path.read_text().strip().splitlines()[-3:])
-        raise MethodError(f"external odometry exited with status {proc.returncode}: {tail}")
+        raise MethodError(f"external odometry exited with status {proc.returncode}: {tail}"
+                          + _relative_paths_hint(template, cwd))
     if not staged.out.is_file():
         raise MethodError(f"external odometry wrote no poses to {{out}} (command: {command})")
     return seconds
+
+
+def _relative_paths_hint(template: str, cwd) -> str:
+    """A hint when the command names files by paths relative to the caller's folder, which it does not run in."""
+    here = Path.cwd()
+    try:
+        words = shlex.split(re.sub(r"\{\w+\}", "", template))
+    except ValueError:  # unbalanced quotes: the shell said what it had to
+        return ""
+    relative = [w for w in words if not w.startswith(("/", "-", "~")) and "/" in w and (here / w).exists()
+                and not (Path(cwd) / w).exists()]
+    if not relative:
+        return ""
+    return (f" (the command runs in a folder of its own, {cwd}, not in {here}: give {relative[0]} by an absolute "
+            "path)")
 
 
 class CommandMethod(Method):

@@ -3,6 +3,7 @@
 "use strict";
 (() => {
 const D = JSON.parse(document.getElementById("salo-data").textContent);
+document.getElementById("salo-data").textContent = "";  // parsed: the text (tens of MB) is not kept twice
 const $ = (id) => document.getElementById(id);
 const errors = [];
 function fail(message) {
@@ -66,7 +67,7 @@ function frame(k) {
 
 // ---------------------------------------------------------------- WebGL2
 const canvas = $("view");
-const gl = canvas.getContext("webgl2", {antialias: true, preserveDrawingBuffer: false});
+const gl = canvas.getContext("webgl2", {antialias: false, preserveDrawingBuffer: false});
 if (!gl) { fail("this browser has no WebGL2: the 3D view cannot be drawn"); }
 const POINT_VS = `#version 300 es
 in vec3 a_pos; in float a_ring; in float a_int; in float a_class; in float a_moving; in float a_kept;

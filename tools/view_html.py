@@ -365,7 +365,7 @@ header {{ padding: 6px 10px; }} header h1 {{ font-size: 15px; margin: 0 0 2px; }
  <label>colour <select id="colour"></select></label>
  <label>scans placed by <select id="place"></select></label>
  <label><input id="split" type="checkbox"> side by side, right by <select id="place2"></select></label>
- <label>trail <input id="trail" type="number" min="0" max="50" value="4" style="width:3.5em"> scans</label>
+ <label>trail <input id="trail" type="number" min="0" max="50" value="2" style="width:3.5em"> scans</label>
  <label>point <input id="size" type="range" min="1" max="6" step="0.5" value="2"></label>
  <label><input id="follow" type="checkbox" checked> follow</label>
  <button id="top">top view</button>
