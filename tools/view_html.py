@@ -16,7 +16,7 @@ Safari 15+) and holds
 - each method's position error per frame against the truth, the truth's weakly
   constrained frames shaded, a cursor at the frame shown (click to go there).
 
-Why a small WebGL2 viewer of our own (``view_html.js``, ~25 kB) and not a library:
+Why a small WebGL2 viewer of our own (``view_html.js``, ~22 kB) and not a library:
 pyvista's HTML export needs a trame/panel stack and writes one static mesh (no frames);
 a rerun recording needs the rerun viewer (tens of MB of WebAssembly) and is not one
 file; three.js would add ~600 kB and draws points no faster than a plain point shader.
