@@ -150,7 +150,9 @@ def test_the_cheat_finds_the_truth_from_a_link_into_a_sequence_folder(tmp_path):
     seq = tmp_path / "out" / "sequences" / "abc"
     (seq / "velodyne").mkdir(parents=True)
     (seq / "velodyne" / "000000.bin").write_bytes(np.zeros(4, np.float32).tobytes())
-    np.savetxt(seq / "poses.txt", np.eye(4)[:3].reshape(1, 12))
+    truth = np.tile(np.eye(4)[:3].ravel(), (3, 1))
+    truth[:, 3] = np.random.default_rng(39).uniform(1, 50, 3)  # a truth of its own, no other file's
+    np.savetxt(seq / "poses.txt", truth)
     (seq / "manifest.json").write_text("{}")
     truths = _truths(tmp_path)
     hard = tmp_path / "stage-hard" / "input" / "velodyne"  # hard links (the staging before this test)
