@@ -284,7 +284,7 @@ def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title
             ax.text(
                 0.5, 0.5,
                 f"no segment of {min(metrics.lengths_m):g} m or more:\n"
-                f"ground-truth path is {metrics.path_length_m:.1f} m",
+                f"ground-truth path is {metres_text(metrics.path_length_m)}",
                 ha="center", va="center", transform=ax.transAxes,
             )
             ax.set_xlim(0, max(metrics.lengths_m) + 100)

@@ -57,10 +57,10 @@ def _unoccluded_camera(vertices, faces, target: np.ndarray, offset: np.ndarray) 
 
 
 def marker_radius_m(vertices: np.ndarray) -> float:
-    """The overview's scan-position marker: 1.2 % of the world's larger horizontal extent (vertices (V, 3), m),
+    """The overview's scan-position marker: 2 % of the world's larger horizontal extent (vertices (V, 3), m),
     so that it shows in a city and covers no room."""
     extent = np.ptp(np.asarray(vertices)[:, :2], axis=0).max() if len(vertices) else 1.0
-    return float(0.012 * max(extent, 1.0))
+    return float(0.02 * max(extent, 1.0))
 
 
 def render_scene(
@@ -110,7 +110,7 @@ def render_scene(
         fwd = T_world_lidar[:3, 0]
         fwd_h = fwd - np.array([0.0, 0.0, fwd[2]])
         fwd_h /= max(np.linalg.norm(fwd_h), 1e-9)
-        pl.add_mesh(pv.Sphere(radius=0.25, center=origin), color="magenta")
+        pl.add_mesh(pv.Sphere(radius=min(0.25, 0.5 * marker_radius_m(vertices)), center=origin), color="magenta")
         camera = _unoccluded_camera(vertices, faces, origin, -45.0 * fwd_h + np.array([0.0, 0.0, 28.0]))
         pl.camera.position = tuple(camera)
         pl.camera.focal_point = tuple(origin + 25.0 * fwd_h)

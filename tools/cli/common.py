@@ -107,7 +107,7 @@ def parse_frames(text: str | None, n: int | None = None, where: str = "the seque
         raise CommandError(f"--frames {text!r}: the step must not be zero")
     frames = slice(parts[0], parts[0] + 1 if parts[0] != -1 else None) if len(parts) == 1 else slice(*parts)
     if n is not None and frames_selected(n, frames) == 0:
-        raise CommandError(f"--frames {text}: selects no frame of {where} (frames 0..{n - 1})")
+        raise CommandError(f"--frames {text!r}: selects no frame of {where} (frames 0..{n - 1})")
     return frames
 
 
