@@ -159,5 +159,7 @@ def test_the_parameters_page_is_what_the_declarations_make():
         assert f"### {name}" in page
     odometry = [name for name, m in schema(OdometryConfig).walk() if not isinstance(m, Section)]
     assert "filter.voxel_size_m" in odometry and "ncf.max_normal_std_deg" in odometry
-    for key in (*SENSOR_FILE.names, *schema(SweepSpec).names, *schema(CommonParams).names, *odometry):
+    sensor = [name for name, m in SENSOR_FILE.walk() if not isinstance(m, Section)]
+    assert "weather.fog.mor_m" in sensor and "receiver.detection_range_m" in sensor
+    for key in (*sensor, *schema(SweepSpec).names, *schema(CommonParams).names, *odometry):
         assert f"| `{key}` |" in page, key
