@@ -33,7 +33,7 @@ import logging
 import math
 import time
 import zlib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -67,7 +67,8 @@ class SuiteSequence:
     """One sequence of the suite: a family drawn with a seed, a sensor, a kind of data.
 
     noise_std_m: range noise (1 sigma), m. start_s: time along the path of the first sweep, s
-    (families in ``PORTAL_AT_FRACTION``: None, the start is placed by the portal).
+    (families in ``PORTAL_AT_FRACTION``: None, the start is placed by the portal). weather: a
+    condition of ``tools.experiments.weather_conditions`` (the weather suite), None without.
     """
 
     family: str
@@ -77,10 +78,12 @@ class SuiteSequence:
     frames: int
     noise_std_m: float
     start_s: float | None
+    weather: str | None = None
 
     @property
     def name(self) -> str:
-        return f"{self.family}-{self.seed}-{self.sensor}-{self.kind}"
+        base = f"{self.family}-{self.seed}-{self.sensor}-{self.kind}"
+        return base if self.weather is None else f"{base}-{self.weather}"
 
 
 def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
@@ -112,6 +115,16 @@ def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[
     return out
 
 
+def weather_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
+                  conditions: tuple[str, ...] | None = None) -> list[SuiteSequence]:
+    """The weather suite: the suite's "simulated" sequences for ``seeds``, each in every weather condition
+    (``tools.experiments.weather_conditions.CONDITIONS``; "clear" is the others' twin), conditions innermost."""
+    from .weather_conditions import CONDITIONS, check_condition
+
+    conditions = tuple(check_condition(c) for c in (conditions or CONDITIONS))
+    return [replace(s, weather=c) for s in suite(seeds, frames, families, ("simulated",)) for c in conditions]
+
+
 def _prepare(seq: SuiteSequence):
     """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
     from scenes import build_scene
@@ -122,6 +135,10 @@ def _prepare(seq: SuiteSequence):
     scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
     world = world_of_scene(scene)
     sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
+    if seq.weather is not None:
+        from .weather_conditions import sensor_in
+
+        sensor = sensor_in(sensor, seq.weather, seq.family, seq.seed)
     span = seq.frames * sensor.sweep_period_s
     start = seq.start_s
     if start is None:
