@@ -52,8 +52,8 @@ in mm): for rain Marshall & Palmer (1948), ``N0 = 8000``, ``Lambda = 4.1
 I^-0.21``; for snow Gunn & Marshall (1958), ``N0 = 3800 I^-0.87``, ``Lambda =
 2.55 I^-0.48``, D the melted diameter, the flake's optical diameter
 ``flake_diameter_factor`` times it (2.15: flakes of 0.1 g/cm^3). Each particle
-type adds an extinction ``alpha = pi f^2 N0 / Lambda^3`` (1/mm, times 1e3 per m: the
-geometric cross-section with an extinction efficiency of 2) to the air's. A
+type adds an extinction ``alpha = pi f^2 N0 / Lambda^3 x 1e-6`` per m (the geometric cross-section
+with an extinction efficiency of 2) to the air's. A
 particle of optical diameter ``D`` in the beam at ``R`` (the beam a cylinder of
 diameter ``w(R) = beam_exit_diameter_m + R * footprint_divergence_rad``, uniformly
 lit) echoes ``p = rho_p min(1, (D / w)^2) xi(R) T(R)^2 / R^2`` (``rho_p`` the

@@ -12,7 +12,9 @@
 - ``particle_returns.png``: rain and snow returns per beam into the sky against the rate ``1 - exp(-mu)`` of
   the drop-size distribution, over precipitation intensity, for the default receiver and a near-sighted one;
 - ``weather_scans.png``: one salo32 sweep in the city, top-down, in clear air and in each weather, the
-  weather's returns coloured by kind.
+  weather's returns coloured by kind;
+- ``overlap_sensitivity.csv``: how much the receiver's near-range overlap (a default of ours) decides: the
+  share of that sweep's beams returning weather with the overlap full at 5 m and at 10 m.
 
 Each check simulates beams (``SweepSimulator``) and sets what it counts beside what the model's equations
 say (computed here from ``simlidar.weather``'s closed forms and tables); the test suite asserts the same
@@ -189,15 +191,16 @@ def particle_returns(out: Path) -> Path:
                  "overlap 0.5 → 2 m": ReceiverParams(enabled=True, overlap_start_m=0.5, overlap_full_m=2.0)}
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
     print("rain and snow: returns per beam into the sky (4 sweeps x 3600 beams) against 1 - exp(-mu)")  # noqa: T201
-    for ax, kind, rates in ((axes[0], "rain", (1.0, 3.0, 10.0, 30.0, 100.0)), (axes[1], "snow", (0.1, 0.3, 1.0, 3.0))):
+    for ax, kind, rates in ((axes[0], "rain", (1.0, 3.0, 10.0, 30.0, 100.0)),
+                            (axes[1], "snow", (0.01, 0.03, 0.1, 0.3, 1.0, 3.0))):
         for j, (name, rec) in enumerate(receivers.items()):
             measured, expected, sigma = [], [], []
-            for rate in rates:
+            for i, rate in enumerate(rates):
                 section = RainParams(enabled=True, rate_mm_h=rate) if kind == "rain" else \
                     SnowParams(enabled=True, rate_mm_h=rate)
                 sensor = _ring(receiver=rec, weather=Weather(**{kind: section}))
                 mu = WeatherModel(sensor).particles[0].cumulative[-1]
-                sim = SweepSimulator(_sky(), sensor, seed=7, motion_distortion=False)
+                sim = SweepSimulator(_sky(), sensor, seed=100 * j + i, motion_distortion=False)  # independent draws
                 beams = 4 * sensor.rays_per_sweep
                 got = sum(len(sim.sweep(_still(), 0.0, frame_index=f)) for f in range(4)) / beams
                 e = 1 - math.exp(-mu)
@@ -284,18 +287,47 @@ def weather_scans(out: Path, sensor_name: str = "salo32") -> Path:
     return path
 
 
+def overlap_sensitivity(out: Path, sensor_name: str = "salo32") -> Path:
+    """The share of a city sweep's beams returning weather, with the receiver's overlap full at 5 m and at 10 m
+    (printed; the file written is a CSV of the same)."""
+    from simlidar.sensor import load_sensor
+    from simlidar.sweep import SweepSimulator
+    from simlidar.weather import ReceiverParams, Weather
+    from tools.worlds import build_scene_world
+
+    scene = build_scene_world("city", 3, {})
+    runs = [("fog", "mor_m", v) for v in (50.0, 100.0, 300.0, 1000.0)] + \
+        [("rain", "rate_mm_h", v) for v in (2.0, 10.0, 30.0)] + [("snow", "rate_mm_h", v) for v in (0.5, 1.0, 3.0)]
+    lines = ["overlap_full_m,weather,key,value,weather_beam_share"]
+    print(f"share of one {sensor_name} sweep's beams returning weather (city seed 3 at 20 s):")  # noqa: T201
+    for full in (5.0, 10.0):
+        rec = ReceiverParams(enabled=True, overlap_full_m=full)
+        shares = []
+        for section, key, value in runs:
+            sensor = load_sensor(sensor_name).with_overrides(
+                receiver=rec, weather=Weather.from_dict({section: {"enabled": True, key: value}}))
+            scan = SweepSimulator(scene.world, sensor, seed=3).sweep(scene.trajectory, 20.0, frame_index=1)
+            share = float((scan.weather > 0).sum()) / sensor.rays_per_sweep
+            shares.append(f"{section} {value:g}: {100 * share:.1f} %")
+            lines.append(f"{full:g},{section},{key},{value:g},{share:.5f}")
+        print(f"  overlap full at {full:g} m: " + ", ".join(shares))  # noqa: T201
+    path = out / "overlap_sensitivity.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def main(argv: list[str] | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/weather"), help="folder for the PNGs (default out/weather)")
-    ap.add_argument("--only", choices=("attenuation", "backscatter", "particles", "scans"), action="append",
+    ap.add_argument("--only", choices=("attenuation", "backscatter", "particles", "scans", "overlap"), action="append",
                     help="make only these pictures (repeatable)")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     makers = {"attenuation": fog_attenuation, "backscatter": fog_backscatter, "particles": particle_returns,
-              "scans": weather_scans}
+              "scans": weather_scans, "overlap": overlap_sensitivity}
     for name in args.only or makers:
         print(makers[name](args.out))  # noqa: T201 - a script that reports what it wrote
 
