@@ -19,10 +19,10 @@ Two sections of a sensor description (``simlidar.sensor.LidarModel``), both off 
   (weather needs the receiver: it acts on the received power).
 
 Fog (Hahner et al., "Fog Simulation on Real LiDAR Point Clouds for 3D Object
-Detection in Adverse Weather", ICCV 2021, Sec. 3, from the paper's equations).
+Detection in Adverse Weather", ICCV 2021, from the paper's equations).
 The meteorological optical range (MOR, the distance over which a beam keeps 5 %
 of its power) sets ``alpha = ln(20) / MOR`` and the backscattering coefficient
-``beta = beta_times_mor / MOR`` (1/(m sr); 0.046 / MOR in the paper). The
+``beta = beta_times_mor / MOR`` (1/(m sr); 0.046 / MOR is Hahner et al.'s). The
 received power is the emitted pulse ``P0(t) = sin^2(pi t / (2 tau_H))``,
 ``0 <= t <= 2 tau_H``, convolved with the channel's impulse response. A surface
 at ``R0`` (a hard target, Lambertian, ``beta_0 = rho cos a / pi``) gives an echo

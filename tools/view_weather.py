@@ -14,7 +14,9 @@
 - ``weather_scans.png``: one salo32 sweep in the city, top-down, in clear air and in each weather, the
   weather's returns coloured by kind;
 - ``overlap_sensitivity.csv``: how much the receiver's near-range overlap (a default of ours) decides: the
-  share of that sweep's beams returning weather with the overlap full at 5 m and at 10 m.
+  share of that sweep's beams returning weather with the overlap full at 5 m and at 10 m;
+- ``suite_conditions.csv`` (``--only suite``, minutes): one sweep of every evaluation sequence of the weather
+  suite in each condition, its surface returns against the clear twin's and its share of weather returns.
 
 Each check simulates beams (``SweepSimulator``) and sets what it counts beside what the model's equations
 say (computed here from ``simlidar.weather``'s closed forms and tables); the test suite asserts the same
@@ -316,20 +318,56 @@ def overlap_sensitivity(out: Path, sensor_name: str = "salo32") -> Path:
     return path
 
 
+def suite_conditions(out: Path) -> Path:
+    """One sweep (frame 50, 5 s after the start) of every evaluation sequence of the weather suite in each
+    condition: surface returns against the clear twin's and the share of weather returns (a CSV, and the
+    summary per condition printed). About 70 sweeps and 14 scenes built: minutes."""
+    from simlidar.sweep import SweepSimulator
+    from tools.experiments.generalize import EVALUATION_SEEDS, _prepare, suite
+    from tools.experiments.weather_conditions import CONDITIONS, draw, sensor_in
+
+    lines = ["family,seed,sensor,condition,drawn,returns,surface,surface_over_twin,weather_share"]
+    summary: dict[str, list[tuple[float, float]]] = {c: [] for c in CONDITIONS}
+    for base in suite(EVALUATION_SEEDS, kinds=("simulated",)):
+        world, trajectory, sensor, start = _prepare(base)
+        twin = None
+        for condition in CONDITIONS:
+            scan = SweepSimulator(world, sensor_in(sensor, condition, base.family, base.seed), seed=base.seed).sweep(
+                trajectory, start + 5.0, frame_index=50)
+            kind = scan.weather if scan.weather is not None else np.zeros(len(scan), np.uint8)
+            surface = int((kind == 0).sum())
+            twin = surface if condition == "clear" else twin
+            drawn = " ".join(f"{k}={v}" for sec in draw(condition, base.family, base.seed).values()
+                             for k, v in sec.items() if k != "enabled")
+            share = float((kind > 0).mean())
+            summary[condition].append((surface / twin, share))
+            lines.append(f"{base.family},{base.seed},{base.sensor},{condition},{drawn},{len(scan)},{surface},"
+                         f"{surface / twin:.4f},{share:.4f}")
+    print("weather suite, evaluation seeds, one sweep a sequence: surface returns / the twin's, weather share")  # noqa: T201
+    for condition, values in summary.items():
+        a = np.array(values)
+        print(f"  {condition:10s} {a[:, 0].mean():.2f} ({a[:, 0].min():.2f}..{a[:, 0].max():.2f})   "  # noqa: T201
+              f"{100 * a[:, 1].mean():.1f} % ({100 * a[:, 1].min():.1f}..{100 * a[:, 1].max():.1f})")
+    path = out / "suite_conditions.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def main(argv: list[str] | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/weather"), help="folder for the PNGs (default out/weather)")
-    ap.add_argument("--only", choices=("attenuation", "backscatter", "particles", "scans", "overlap"), action="append",
-                    help="make only these pictures (repeatable)")
+    ap.add_argument("--only", choices=("attenuation", "backscatter", "particles", "scans", "overlap", "suite"),
+                    action="append", help="make only these (repeatable; suite: not by default, minutes)")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     makers = {"attenuation": fog_attenuation, "backscatter": fog_backscatter, "particles": particle_returns,
               "scans": weather_scans, "overlap": overlap_sensitivity}
+    makers_all = {**makers, "suite": suite_conditions}
     for name in args.only or makers:
-        print(makers[name](args.out))  # noqa: T201 - a script that reports what it wrote
+        print(makers_all[name](args.out))  # noqa: T201 - a script that reports what it wrote
 
 
 if __name__ == "__main__":
