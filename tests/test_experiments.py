@@ -451,8 +451,8 @@ def test_cli_commands_parse():
 
     parser = argparse.ArgumentParser(prog="salo")
     cli_experiment.add_commands(parser.add_subparsers(dest="command", required=True))
-    a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match.target=raw"])
-    assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match.target=raw"]
+    a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match.target=map"])
+    assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match.target=map"]
     from tools.experiments.table import DEFAULT_METHODS
 
     assert a.methods == ",".join(DEFAULT_METHODS)  # the CLI's spelled-out default is the table's

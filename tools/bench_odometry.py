@@ -30,8 +30,9 @@ import tracemalloc
 import numpy as np
 
 from odometry.config import DEFAULT_VARIANT, ConfigError, changes_from_assignments, config_from_dict, variant
+from odometry.diagnostics import STAGES
 from odometry.metrics import evaluate_trajectory
-from odometry.pipeline import STAGES, Odometry, ScanInput, register_frames
+from odometry.pipeline import Odometry, ScanInput, register_frames
 from simlidar.sequence import deskew_times
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
 

@@ -86,7 +86,7 @@ class FrameFlags:
 
     @classmethod
     def of(cls, diagnostics) -> FrameFlags:
-        """Counted over ``odometry.pipeline.FrameDiagnostics``, one per frame."""
+        """Counted over ``odometry.diagnostics.FrameDiagnostics``, one per frame."""
         return cls(sum(d.extrapolated for d in diagnostics), sum(d.degenerate for d in diagnostics),
                    sum(d.remapped > 0 for d in diagnostics))
 
@@ -96,7 +96,7 @@ class RunFiles:
     """Where a run's outputs go (None: not written).
 
     poses: KITTI poses, one 3x4 line per frame (first = identity). diagnostics:
-    the per-frame CSV (``odometry.pipeline.CSV_COLUMNS``). config: the resolved
+    the per-frame CSV (``odometry.diagnostics.CSV_COLUMNS``). config: the resolved
     odometry config, YAML. tum: the trajectory in TUM format.
     """
 
@@ -132,7 +132,7 @@ def write_run_files(files: RunFiles, poses: np.ndarray, diagnostics: list | None
 
     write_kitti_poses(files.poses, poses)
     if files.diagnostics is not None and diagnostics is not None:
-        from odometry.pipeline import write_diagnostics_csv
+        from odometry.diagnostics import write_diagnostics_csv
 
         write_diagnostics_csv(files.diagnostics, diagnostics)
     if files.config is not None and config is not None:

@@ -59,7 +59,7 @@ def _common(p, name: str) -> None:
     p.add_argument("--quick", action="store_true", help="a small, fast run (minutes -> seconds): for trying it out")
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an odometry parameter for every method (repeatable), a dotted key: e.g. "
-                   "match.target=raw (salo odometry --keys lists them)")
+                   "match.target=map (salo odometry --keys lists them)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
 
 

@@ -58,7 +58,8 @@ def print_keys() -> None:
 
 def cmd_odometry(args) -> int:
     from odometry.config import ConfigError, config_from_dict, load_config, variant
-    from odometry.pipeline import OdometryError, degenerate_stretches
+    from odometry.diagnostics import degenerate_stretches
+    from odometry.pipeline import OdometryError
     from simlidar.dataset import open_sequence
     from tools.runners import RunFiles, run_method
 

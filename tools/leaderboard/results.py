@@ -96,7 +96,7 @@ def run_one(method, sequence, out: str | Path, fields, *, timeout_s: float, work
                                    on_frame=on_frame)
         write_kitti_poses(folder / "poses.txt", output.poses)
         if output.diagnostics is not None:
-            from odometry.pipeline import write_diagnostics_csv
+            from odometry.diagnostics import write_diagnostics_csv
 
             write_diagnostics_csv(folder / "diagnostics.csv", output.diagnostics)
         flagged = [] if output.degenerate is None else [int(k) for k in np.flatnonzero(output.degenerate)]
