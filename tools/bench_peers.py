@@ -22,8 +22,23 @@ import numpy as np
 from odometry.config import variant
 from odometry.metrics import evaluate_trajectory
 from simlidar.dataset import open_sequence
-from tools.bench_odometry import FramesInMemory
 from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
+
+
+class FramesInMemory:
+    """A sequence's frames read once, so that the peers' times exclude reading (what their runners read:
+    ``len``, ``[k]``, ``sensor``, ``poses``, ``times``, ``manifest``, ``path``)."""
+
+    def __init__(self, seq, frames: list):
+        self.frames = frames
+        self.sensor, self.poses, self.times, self.manifest, self.path = (seq.sensor, seq.poses, seq.times,
+                                                                        seq.manifest, seq.path)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, k: int):
+        return self.frames[k]
 
 
 def main() -> None:
