@@ -205,8 +205,8 @@ class OdometryConfig(Params):
 
     Each stage is a section (``cfg.ncf.max_normal_std_deg``; ``ncf:`` in YAML,
     ``ncf.max_normal_std_deg=3`` on the command line) whose keys are declared
-    with their bounds and help. Why the defaults are what they are: the README
-    ("The method, and our choices"). The ICP's termination (1 mm, 0.01 deg) is
+    with their bounds and help. Why the defaults are what they are:
+    docs/default-choices.md; why each key exists: docs/keys.md. The ICP's termination (1 mm, 0.01 deg) is
     an order below a frame's own error of about a centimetre: tighter only adds
     iterations. A prediction error of 1 m is 10 m/s^2 of sudden acceleration at
     10 Hz, ten times over. Rules between keys: ``clean.min_range_m`` <
@@ -261,7 +261,7 @@ NCF_MAP = NCF.replace(name="ncf-map", match={"target": "map"}, ncf={"applies_to"
 SALO_MAP = SALO.replace(name="salo-map", match={"target": "map"}, ncf={"applies_to": "map"}, poles={"enabled": True})
 VARIANTS = {c.name: c for c in (BL, NCF, SALO, BL_MAP, NCF_MAP, SALO_MAP)}
 # What ``salo odometry`` runs without --variant (chosen on the generalisation suite's tuning
-# seeds; README "The method, and our choices").
+# seeds; docs/default-choices.md).
 DEFAULT_VARIANT = "salo-map"
 
 
@@ -294,9 +294,9 @@ def refuse_removed_keys(data: Any, origin: str) -> None:
     for dotted, why in REMOVED_KEYS.items():
         section, key = dotted.split(".")
         if isinstance(data.get(section), dict) and key in data[section]:
-            raise ConfigError(f"was removed ({why}; docs/method.md, 'Measured and not kept')", dotted).at(origin)
+            raise ConfigError(f"was removed ({why}; docs/default-choices.md, 'Measured and not kept')", dotted).at(origin)
     if isinstance(data.get("match"), dict) and data["match"].get("target") == "raw":
-        raise ConfigError("'raw' was removed (a raw scan as the target: docs/method.md, 'Measured and not kept'); "
+        raise ConfigError("'raw' was removed (a raw scan as the target: docs/default-choices.md, 'Measured and not kept'); "
                           "use filtered or map", "match.target").at(origin)
 
 

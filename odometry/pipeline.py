@@ -530,7 +530,7 @@ class ScanInput(NamedTuple):
 # variants: their normals are the map's) one: with the registration's steps compiled, its ~5 ms a frame
 # beside the registration gained in each of five interleaved comparisons (100 city frames, 4-8 rounds:
 # the default at 0.90-1.00x against 0.92-1.07x KISS-ICP's time on hdl32e with one ahead and none in
-# three, 0.76-0.80x against 0.83-0.84x on salo32 in two; two ahead no better; README, "Benchmarks").
+# three, 0.76-0.80x against 0.83-0.84x on salo32 in two; two ahead no better; docs/speed-history.md).
 # (When more of the frame was Python, one ahead slowed the registering thread by about as much as it saved.)
 PREFETCH_SCANS = 2
 PREFETCH_SCANS_WITHOUT_NORMALS = 1
