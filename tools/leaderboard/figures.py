@@ -1,6 +1,6 @@
 """The leaderboard's figures per sequence (PNG; matplotlib inside the functions, as ``tools.plotting``).
 
-- trajectories: the top view of the truth and every method (``plots.trajectory_plot``);
+- trajectories: the top view of the truth and every method (``tools.plotting.trajectory_plot``);
 - error over distance: each method's position error (m, log) against the distance
   travelled, with the frames the simulator's truth finds weakly constrained shaded,
   and beneath, a strip per method that reports its own weak frames;
