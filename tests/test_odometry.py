@@ -206,7 +206,7 @@ def test_cold_start_on_open_ground_from_rest():
     the map target there; the targets are compared without them."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     spec = next(s for s in suite((107,), frames=3, families=("open",)) if s.kind == "real")
     seq = simulate(dataclasses.replace(spec, sensor="salo32"))
@@ -241,7 +241,7 @@ def test_the_better_constrained_first_registration_is_kept():
     (highway-102, narrow32, as real) the map's, so both ways are taken."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     # without poles, whose agreed offset would start both registrations near the truth
     no_poles = variant(DEFAULT_VARIANT).replace(poles={"enabled": False})
@@ -286,7 +286,7 @@ def test_cold_start_at_speed_keeps_the_coarse_estimate():
     the difference may decide, and they keep the coarse estimate."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     spec = next(s for s in suite((102,), frames=2, families=("highway",)) if s.kind == "real")
     seq = simulate(dataclasses.replace(spec, sensor="narrow32"))
