@@ -212,7 +212,7 @@ def test_cold_start_on_open_ground_from_rest():
     keeps even the map target there; the targets are compared without them."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     spec = next(s for s in suite((107,), frames=3, families=("open",)) if s.kind == "real")
     seq = simulate(dataclasses.replace(spec, sensor="salo32"))
@@ -243,7 +243,7 @@ def test_the_better_constrained_first_registration_is_kept():
     both ways are taken, and each time the one nearer the truth."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     # without poles, whose agreed offset would start both registrations near the truth
     no_poles = variant(DEFAULT_VARIANT).replace(poles={"enabled": False})
@@ -284,7 +284,7 @@ def test_cold_start_at_speed_finds_the_first_motion():
     1.7 m off)."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     spec = next(s for s in suite((102,), frames=2, families=("highway",)) if s.kind == "real")
     seq = simulate(dataclasses.replace(spec, sensor="narrow32"))

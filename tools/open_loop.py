@@ -132,7 +132,7 @@ def plot_along(errors: dict[str, OpenLoopErrors], title: str, path: Path) -> Non
 
 def main(argv: list[str] | None = None) -> int:
     from odometry.config import ConfigError, changes_from_assignments
-    from tools.experiments.generalize import EVALUATION_SEEDS, KINDS, SENSORS, simulate, suite
+    from tools.family_suite import EVALUATION_SEEDS, KINDS, SENSORS, simulate, suite
     from tools.methods import MethodError, our_config
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

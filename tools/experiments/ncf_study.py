@@ -40,8 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence
+from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.sequence_cache import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence
 
 log = logging.getLogger(__name__)
 

@@ -90,11 +90,11 @@ from pathlib import Path
 import numpy as np
 
 from simlidar import se3
+from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.sequence_cache import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 
 from .levels import bounded_recall, level_label
 from .map_target import MapFrame, build_map_target
-from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 from .truth import PointTruth, TruthCriteria, true_matches, truth_of_points, truth_of_rows
 
 log = logging.getLogger(__name__)

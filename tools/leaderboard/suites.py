@@ -46,7 +46,7 @@ def bench_sequences(suite: str | Path, out: str | Path, *, frames: int | None = 
     """The suite's sequences under ``out``/sequences, simulating those not there yet.
 
     suite: "regress" (``tools.sweep.regress.SUITE``), "generalize" (the evaluation split of
-    ``tools.experiments.generalize``; ``frames`` and ``families`` narrow it) or a sweep spec
+    ``tools.family_suite``; ``frames`` and ``families`` narrow it) or a sweep spec
     YAML (its scenes x seeds x sensors x noise levels; its variants are not used).
     on_sequence(id) before each simulation. Raises SuiteError.
     """
@@ -90,11 +90,10 @@ def _sweep(suite, out: Path, frames: int | None, on_sequence) -> list[BenchSeque
 
 
 def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_sequence) -> list[BenchSequence]:
-    from tools.experiments.generalize import DEFAULT_FRAMES, GeneralizeParams, simulate_to_folder
+    from tools.family_suite import DEFAULT_FRAMES, EVALUATION_SEEDS, simulate_to_folder, suite
 
     try:
-        params = GeneralizeParams(frames=frames or DEFAULT_FRAMES, families=tuple(families))
-        seqs = params.sequences()
+        seqs = suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None)
     except ValueError as exc:
         raise SuiteError(str(exc)) from None
     sequences = []
