@@ -291,13 +291,14 @@ def refuse_removed_keys(data: Any, origin: str) -> None:
     """ConfigError when a YAML-style mapping sets a key of ``REMOVED_KEYS`` (or ``match.target: raw``)."""
     if not isinstance(data, dict):
         return
+    record = "docs/default-choices.md, 'Measured and not kept'"
     for dotted, why in REMOVED_KEYS.items():
         section, key = dotted.split(".")
         if isinstance(data.get(section), dict) and key in data[section]:
-            raise ConfigError(f"was removed ({why}; docs/default-choices.md, 'Measured and not kept')", dotted).at(origin)
+            raise ConfigError(f"was removed ({why}; {record})", dotted).at(origin)
     if isinstance(data.get("match"), dict) and data["match"].get("target") == "raw":
-        raise ConfigError("'raw' was removed (a raw scan as the target: docs/default-choices.md, 'Measured and not kept'); "
-                          "use filtered or map", "match.target").at(origin)
+        raise ConfigError(f"'raw' was removed (a raw scan as the target: {record}); use filtered or map",
+                          "match.target").at(origin)
 
 
 def changes_from_assignments(pairs, origin: str = "--set") -> dict:
