@@ -424,9 +424,6 @@ def run_method(method: Method, sequence, *, stage: bool = True, frames: slice | 
                                  on_frame=on_frame, **_chosen(frames))
 
 
-# README.md's name for ``run_method`` (the same function), kept until its API block says ``run_method``.
-run_method_staged = run_method
-
 
 __all__ = ["DEFAULT_COMMAND_TIMEOUT_S", "LABELS", "PLACEHOLDERS", "PLUGIN_GROUP", "CommandMethod", "FunctionMethod",
            "Method", "MethodError", "OursMethod", "PeerMethod", "builtin_names", "check_command", "command_problem",
