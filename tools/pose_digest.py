@@ -51,7 +51,7 @@ def configs() -> dict:
 
 def suite_sequences(frames: int, families: tuple[str, ...] | None):
     """(name, in-memory sequence) of one tuning seed per family, both kinds, as the suite simulates them."""
-    from tools.experiments.generalize import TUNING_SEEDS, simulate, suite
+    from tools.family_suite import TUNING_SEEDS, simulate, suite
 
     for seq in suite((TUNING_SEEDS[0],), frames=frames, families=families):
         yield seq.name, simulate(seq)
