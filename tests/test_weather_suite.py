@@ -11,8 +11,8 @@ import pytest
 
 from simlidar.in_memory import simulate_in_memory
 from simlidar.weather import FOG, KINDS
-from tools.experiments.generalize import EVALUATION_SEEDS, _prepare, suite, weather_suite
-from tools.experiments.weather_conditions import CONDITIONS, DRAWS, draw
+from tools.family_suite import EVALUATION_SEEDS, _prepare, suite, weather_suite
+from tools.weather_conditions import CONDITIONS, DRAWS, draw
 
 
 def test_the_weather_suite_draws_every_condition_beside_its_clear_twin():

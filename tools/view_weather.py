@@ -324,7 +324,7 @@ def suite_conditions(out: Path) -> Path:
     summary per condition printed). About 70 sweeps and 14 scenes built: minutes."""
     from simlidar.sweep import SweepSimulator
     from tools.experiments.generalize import EVALUATION_SEEDS, _prepare, suite
-    from tools.experiments.weather_conditions import CONDITIONS, draw, sensor_in
+    from tools.weather_conditions import CONDITIONS, draw, sensor_in
 
     lines = ["family,seed,sensor,condition,drawn,returns,surface,surface_over_twin,weather_share"]
     summary: dict[str, list[tuple[float, float]]] = {c: [] for c in CONDITIONS}

@@ -75,7 +75,7 @@ MAGIC = b"SALOTRU2"
 HEADER_BYTES = 32
 KNOT_FLOATS = 6
 OCT_SCALE = 32767.0
-# Bounds the format guarantees (README "A sequence folder"; checked by the round-trip test).
+# Bounds the format guarantees (docs/sequence-format.md; checked by the round-trip test).
 TRUE_XYZ_REL_BOUND = 4e-7  # x true range
 TRUE_XYZ_ABS_BOUND_M = 1e-6
 NORMAL_BOUND_DEG = 0.01

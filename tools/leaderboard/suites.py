@@ -48,10 +48,9 @@ def bench_sequences(suite: str | Path, out: str | Path, *, frames: int | None = 
     """The suite's sequences under ``out``/sequences, simulating those not there yet.
 
     suite: "regress" (``tools.sweep.regress.SUITE``), "generalize" (the evaluation split of
-    ``tools.experiments.generalize``; ``frames`` and ``families`` narrow it), "weather" (its
-    simulated sequences in each weather condition, ``generalize.weather_suite``; the same
-    narrowing) or a sweep spec YAML (its scenes x seeds x sensors x noise levels; its variants
-    are not used).
+    ``tools.family_suite``; ``frames`` and ``families`` narrow it), "weather" (its simulated
+    sequences in each weather condition, ``family_suite.weather_suite``; the same narrowing) or a
+    sweep spec YAML (its scenes x seeds x sensors x noise levels; its variants are not used).
     on_sequence(id) before each simulation. Raises SuiteError.
     """
     out = Path(out)
@@ -95,12 +94,11 @@ def _sweep(suite, out: Path, frames: int | None, on_sequence) -> list[BenchSeque
 
 def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_sequence,
                 weather: bool = False) -> list[BenchSequence]:
-    from tools.experiments.generalize import DEFAULT_FRAMES, GeneralizeParams, simulate_to_folder, weather_suite
+    from tools.family_suite import DEFAULT_FRAMES, EVALUATION_SEEDS, simulate_to_folder, suite, weather_suite
 
     try:
-        params = GeneralizeParams(frames=frames or DEFAULT_FRAMES, families=tuple(families))
-        seqs = weather_suite(params.seed_list, params.frames, tuple(families) or None) if weather \
-            else params.sequences()
+        seqs = weather_suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None) if weather \
+            else suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None)
     except ValueError as exc:
         raise SuiteError(str(exc)) from None
     sequences = []

@@ -1,6 +1,6 @@
 """Weather as drawn conditions of the generalisation suite: clear air, light and dense fog, rain, snow.
 
-Every sequence of the weather suite (``tools.experiments.generalize.weather_suite``) is a sequence of the
+Every sequence of the weather suite (``tools.family_suite.weather_suite``) is a sequence of the
 generalisation suite (its family, seed, sensor, noise and start; the "simulated" kind) in one of
 ``CONDITIONS``; the "clear" one is the twin of the others: the same seed, path, sensor and receiver, in
 clear air. Every condition has the sensor's receiver on (``simlidar.weather``: a 10 % target detected at
