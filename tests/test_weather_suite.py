@@ -11,7 +11,7 @@ import pytest
 
 from simlidar.in_memory import simulate_in_memory
 from simlidar.weather import FOG, KINDS
-from tools.family_suite import EVALUATION_SEEDS, _prepare, suite, weather_suite
+from tools.family_suite import EVALUATION_SEEDS, suite, suite_world, weather_suite
 from tools.weather_conditions import CONDITIONS, DRAWS, draw
 
 
@@ -42,7 +42,7 @@ def test_each_condition_simulates_its_weather_on_the_twins_path():
     seqs = weather_suite((EVALUATION_SEEDS[0],), frames=2, families=("tunnel",))
     got = {}
     for s in seqs:
-        world, trajectory, sensor, start = _prepare(s)
+        world, trajectory, sensor, start = suite_world(s)
         assert sensor.receiver.enabled and sensor.weather.on == (s.weather != "clear")
         mem = simulate_in_memory(world, trajectory, sensor, 2, seed=s.seed, t_start=start, fields="truth")
         got[s.weather] = (mem, sensor)

@@ -109,7 +109,7 @@ def weather_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families
     return [replace(s, weather=c) for s in suite(seeds, frames, families, ("simulated",)) for c in conditions]
 
 
-def _prepare(seq: SuiteSequence):
+def suite_world(seq: SuiteSequence):
     """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
     from scenes import build_scene
     from scenes.families import draw_family_params, family_scene
@@ -139,7 +139,7 @@ def simulate(seq: SuiteSequence, progress=None):
     """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
     from simlidar.in_memory import simulate_in_memory
 
-    world, trajectory, sensor, start = _prepare(seq)
+    world, trajectory, sensor, start = suite_world(seq)
     return simulate_in_memory(world, trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
                               fields=seq.kind, name=seq.name, on_frame=progress)
 
@@ -149,7 +149,7 @@ def simulate_to_folder(seq: SuiteSequence, out, force: bool = False):
     without motion distortion (its per-point fields are the staging's to leave out). Returns the path."""
     from simlidar.simulate import simulate_sequence
 
-    world, trajectory, sensor, start = _prepare(seq)
+    world, trajectory, sensor, start = suite_world(seq)
     return simulate_sequence(world, trajectory, sensor, out, frames=seq.frames, seed=seq.seed, t_start=start,
                              motion_distortion=seq.kind == "simulated", force=force,
                              info={"command": "bench", "suite_sequence": asdict(seq)})

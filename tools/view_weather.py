@@ -323,13 +323,13 @@ def suite_conditions(out: Path) -> Path:
     condition: surface returns against the clear twin's and the share of weather returns (a CSV, and the
     summary per condition printed). About 70 sweeps and 14 scenes built: minutes."""
     from simlidar.sweep import SweepSimulator
-    from tools.experiments.generalize import EVALUATION_SEEDS, _prepare, suite
+    from tools.family_suite import EVALUATION_SEEDS, suite, suite_world
     from tools.weather_conditions import CONDITIONS, draw, sensor_in
 
     lines = ["family,seed,sensor,condition,drawn,returns,surface,surface_over_twin,weather_share"]
     summary: dict[str, list[tuple[float, float]]] = {c: [] for c in CONDITIONS}
     for base in suite(EVALUATION_SEEDS, kinds=("simulated",)):
-        world, trajectory, sensor, start = _prepare(base)
+        world, trajectory, sensor, start = suite_world(base)
         twin = None
         for condition in CONDITIONS:
             scan = SweepSimulator(world, sensor_in(sensor, condition, base.family, base.seed), seed=base.seed).sweep(
