@@ -152,7 +152,7 @@ def test_intensity_follows_the_object_reflectance_and_the_incidence():
     cos = np.abs(np.einsum("ij,ij->i", beam, scan.normal))
     expected = np.array([0.2, 0.7])[scan.object_id] * cos**2 * np.minimum(1.0, (10.0 / scan.range_m) ** 2)
     assert np.abs(scan.intensity - expected).max() < 1e-6
-    # the default (k = 1, reflectance from the labels) is the formula the README has always given
+    # the default (k = 1, reflectance from the labels) is the formula docs/simulation.md gives
     plain = SweepSimulator(labelled, load_sensor("vlp16"), seed=1, motion_distortion=False).sweep(_still(), 0.0)
     beam = plain.xyz / np.linalg.norm(plain.xyz, axis=1, keepdims=True)
     cos = np.abs(np.einsum("ij,ij->i", beam, plain.normal))

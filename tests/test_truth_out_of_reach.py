@@ -175,7 +175,7 @@ def test_the_cheat_finds_the_truth_from_a_link_into_a_sequence_folder(tmp_path):
 
 def test_a_command_runs_in_a_folder_of_its_own_and_a_relative_path_gets_a_hint(tmp_path, monkeypatch):
     from simlidar.sensor import load_sensor
-    from tools.methods import CommandMethod, MethodError, run_method_staged
+    from tools.methods import CommandMethod, MethodError, run_method
     from tools.runners import simulate_scene
     from tools.worlds import build_scene_world
 
@@ -189,11 +189,11 @@ def test_a_command_runs_in_a_folder_of_its_own_and_a_relative_path_gets_a_hint(t
     monkeypatch.setenv("OLDPWD", str(tmp_path / "seq"))
     from simlidar.dataset import open_sequence
 
-    run_method_staged(CommandMethod("where", f"{sys.executable} {script} {{out}} # {{scans}}"), open_sequence(seq),
+    run_method(CommandMethod("where", f"{sys.executable} {script} {{out}} # {{scans}}"), open_sequence(seq),
                       log_path=tmp_path / "where.log")
     words = (tmp_path / "where.log").read_text().split()
     cwd, pwd, oldpwd = words[words.index("cwd") + 1], words[words.index("PWD") + 1], words[-1]
     assert cwd == pwd and Path(cwd).name == "work" and "salo-input-" in cwd and oldpwd == "None"
     with pytest.raises(MethodError, match=r"runs in a folder of its own.*give bin/where.py by an absolute path"):
-        run_method_staged(CommandMethod("rel", f"{sys.executable} bin/where.py {{out}} # {{scans}}"),
+        run_method(CommandMethod("rel", f"{sys.executable} bin/where.py {{out}} # {{scans}}"),
                           open_sequence(seq), log_path=tmp_path / "rel.log")

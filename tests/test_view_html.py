@@ -165,8 +165,8 @@ def test_a_bench_page_shows_ours_and_a_peer_side_by_side(tmp_path, monkeypatch):
 
     import yaml
     from PIL import Image
-
     from tools.experiments.peer import peer_unavailable_reason
+
     from tools.leaderboard import run_bench
     from tools.methods import method_from_name
 

@@ -307,7 +307,7 @@ def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title
     if title:
         fig.suptitle(title)
 
-    from tools.experiments.plots import save_png
+    from tools.plotting import save_png
 
     try:
         save_png(fig, path)

@@ -41,7 +41,7 @@ class IsolatedRunError(ValueError):
 @dataclass(frozen=True)
 class IsolatedResult:
     """What a plug-in's process gave: poses (N, 4, 4), its own weak-frame flags (N,) bool or None, its wall
-    time, s, and its settings and note (``tools.methods.MethodOutput``'s)."""
+    time, s, and its settings and note (``tools.runners.MethodRun``'s)."""
 
     poses: np.ndarray
     degenerate: np.ndarray | None

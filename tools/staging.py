@@ -8,7 +8,7 @@ of its own outside the sequence's::
     STAGE/input/                 {sequence}
       velodyne/NNNNNN.bin        {scans}: float32 x y z intensity, as measured (copies)
       times.txt                  {times}: sweep start per frame, s
-      sensor.yaml                {sensor}: the sensor model
+      sensor.yaml                {sensor}: the sensor model (without its weather: a real sensor does not report it)
       fields/NNNNNN.npy          per-point fields the run opts into (``SENSOR_FIELDS``), one array per scan
     STAGE/output/poses.txt       {out}: where the method writes its KITTI poses
     STAGE/work/                  where a method's process runs (its working folder), empty at the start
@@ -50,7 +50,7 @@ SENSOR_FIELDS = ("ring", "time_s", "azimuth_index", "range_m")
 # The default: what the Velodyne driver's XYZIRT cloud carries besides x y z intensity.
 DEFAULT_FIELDS = ("ring", "time_s")
 # The simulator's truth: never handed to a method.
-TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id")
+TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather")
 
 
 class StagingError(DatasetError):
@@ -158,10 +158,10 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
                 np.save(root / "fields" / f"{name}.npy", record, allow_pickle=False)
                 staged_fields.update(record.dtype.names)
     sensor_file = Path(sequence.path) / "sensor.yaml"
-    if sensor_file.is_file():
+    if sensor_file.is_file() and not sequence.sensor.weather.on:
         shutil.copyfile(sensor_file, root / "sensor.yaml")
     else:
-        (root / "sensor.yaml").write_text(sequence.sensor.to_yaml())
+        (root / "sensor.yaml").write_text(sequence.sensor.clear_air().to_yaml())
     (root / "times.txt").write_text(format_times(sweep_start_times(sequence)))
     return StagedInput(root, out_dir / "poses.txt", tuple(f for f in fields if f in staged_fields), len(sequence))
 
@@ -169,7 +169,8 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
 def sensor_view(sequence, fields=DEFAULT_FIELDS):
     """What ``stage_input`` would hand over, kept in memory: an in-memory sequence
     (``simlidar.in_memory.InMemorySequence``) without poses, truth figures or manifest,
-    its per-point fields cut to ``fields`` (less ``time_s`` without motion distortion).
+    its per-point fields cut to ``fields`` (less ``time_s`` without motion distortion),
+    its sensor without the weather.
 
     Raises StagingError when the sequence has no sensor model.
     """
@@ -177,7 +178,7 @@ def sensor_view(sequence, fields=DEFAULT_FIELDS):
 
     fields = _fields_to_hand_over(sequence, fields)
     return replace(sequence, fields=[_sensor_record(r, fields) for r in sequence.fields], poses=None,
-                   degeneracy=[], manifest={})
+                   degeneracy=[], manifest={}, sensor=sequence.sensor.clear_air())
 
 
 def _fields_to_hand_over(sequence, fields) -> tuple[str, ...]:

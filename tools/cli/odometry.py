@@ -60,9 +60,10 @@ def print_keys() -> None:
 
 def cmd_odometry(args) -> int:
     from odometry.config import ConfigError, config_from_dict, load_config, variant
-    from odometry.pipeline import OdometryError, degenerate_stretches
+    from odometry.diagnostics import degenerate_stretches
     from simlidar.dataset import open_sequence
-    from tools.runners import RunFiles, run_method
+    from tools.methods import MethodError, OursMethod, run_method
+    from tools.runners import RunFiles, write_run_files
 
     if args.keys:
         print_keys()
@@ -91,14 +92,16 @@ def cmd_odometry(args) -> int:
         raise CommandError(f"{existing[0]}: already exists (use --force to replace it"
                            + (f" and {len(existing) - 1} more beside it" if len(existing) > 1 else "") + ")")
     bar = progress_bar(frames_selected(len(seq), frames), "frame", f"odometry {config.name}")
-    try:
-        result = run_method(seq, config, frames=frames, on_frame=lambda k, d: bar.update(1), files=files)
-    except OdometryError as exc:
+    try:  # the user's own data, read as given (--sensor, --poses): nothing to stage
+        result = run_method(OursMethod(config.name, config), seq, stage=False, frames=frames,
+                            on_frame=lambda k, d: bar.update(1))
+    except MethodError as exc:
         text = str(exc)  # the odometry's errors name the sequence already, most of them
         raise CommandError(text if text.startswith(str(args.sequence)) else f"{args.sequence}: {text}") from None
     finally:
         bar.close()
-    stretches = degenerate_stretches(result.run.diagnostics)
+    write_run_files(files, result.poses, result.diagnostics, config, result.odometry_run.times_s, seq.sensor)
+    stretches = degenerate_stretches(result.diagnostics)
     print(f"{len(result.poses)} frames at {result.frames_per_second:.1f} frames/s -> {out}")
     if result.flags.extrapolated:
         print(f"  {result.flags.extrapolated} frames extrapolated (too few points, singular system or an estimate "

@@ -5,7 +5,7 @@ The pieces, one module each:
 - ``suites``: which sequences (the regression suite, the generalisation suite, a
   sweep spec), simulated once into ``OUT/sequences/``;
 - ``results``: one method on one sequence, staged without ground truth
-  (``tools.methods.run_method_staged``), evaluated, stored per method and sequence
+  (``tools.methods.run_method``), evaluated, stored per method and sequence
   in ``OUT/results/<method>/<sequence>/``; a stored result of the same method
   settings on the same sequence is reused, so a new method is added without
   re-running the others;
@@ -153,7 +153,7 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
     """The figures, ``leaderboard.md`` and ``leaderboard.html`` into ``out``; pages: each sequence's 3D view."""
     from odometry.config import DEFAULT_VARIANT
     from tools.degenerate import TRUTH_THRESHOLD, diagnostics_constraints, truth_constraints
-    from tools.experiments.report import html_page
+    from tools.html_page import html_page
 
     from . import figures
     from .page import family_rows, table_markdown
