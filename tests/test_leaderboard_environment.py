@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from odometry.pipeline import DegenerateStretch
+from odometry.diagnostics import DegenerateStretch
 from tools.leaderboard.environment import environment_figures, weak_direction_error, windowed_error_pct
 from tools.leaderboard.page import family_rows, table_markdown
 

@@ -149,7 +149,7 @@ def test_simulating_into_an_existing_folder_from_python_names_force_true(seq):
 def test_a_stretch_says_which_clause_flagged_it():
     from types import SimpleNamespace
 
-    from odometry.pipeline import DegenerateStretch
+    from odometry.diagnostics import DegenerateStretch
     from tools.cli.odometry import flagged_by
 
     stretch = DegenerateStretch(3, 9, np.array([1.0, 0.0, 0.0]), 0.06, 7)
