@@ -32,13 +32,15 @@ def run_dir(tmp_path_factory) -> Path:
     from odometry.config import variant
     from simlidar.formats.kitti import write_kitti_poses
     from simlidar.sensor import load_sensor
-    from tools.runners import RunFiles, run_method, simulate_scene
+    from tools.methods import OursMethod, run_method
+    from tools.runners import RunFiles, simulate_scene, write_run_files
     from tools.worlds import build_scene_world
 
     root = tmp_path_factory.mktemp("view")
     simulate_scene(build_scene_world("city", 0, {"speed_m_s": 8.0}), load_sensor("vlp16"), root / "seq", 6, seed=0,
                    start_s=4.0)
-    run_method(open_sequence(root / "seq"), variant("bl"), files=RunFiles.beside(root / "bl" / "poses.txt"))
+    run = run_method(OursMethod("bl", variant("bl")), open_sequence(root / "seq"))
+    write_run_files(RunFiles.beside(root / "bl" / "poses.txt"), run.poses, run.diagnostics, variant("bl"))
     guess = np.tile(np.eye(4), (6, 1, 1))
     guess[:, 0, 3] = 0.5 * np.arange(6)
     write_kitti_poses(root / "guess.txt", guess)
@@ -165,10 +167,10 @@ def test_a_bench_page_shows_ours_and_a_peer_side_by_side(tmp_path, monkeypatch):
 
     import yaml
     from PIL import Image
-    from tools.experiments.peer import peer_unavailable_reason
 
     from tools.leaderboard import run_bench
     from tools.methods import method_from_name
+    from tools.peers import peer_unavailable_reason
 
     browser.chromium()
     why = peer_unavailable_reason("kiss-icp")

@@ -111,7 +111,7 @@ def cmd_odometry(args) -> int:
               + (f", or the prior kept below {config.degeneracy.min_constraint_eigenvalue:g}"
                  if config.degeneracy.min_constraint_eigenvalue else "") + "):")
         for st in stretches[:20]:
-            print("    " + flagged_by(st, result.run.diagnostics, config.degeneracy.degenerate_eigenvalue))
+            print("    " + flagged_by(st, result.diagnostics, config.degeneracy.degenerate_eigenvalue))
         if len(stretches) > 20:
             print(f"    ... {len(stretches) - 20} more stretches in {files.diagnostics}")
     return 0

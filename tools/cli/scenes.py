@@ -74,7 +74,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--frame", type=whole_number(0), help="sequence: show frame N (its scan in the world)")
     p.add_argument("--sensor", help="scene: sensor preset or YAML (default salo32)")
     p.add_argument("--out", type=Path, help="output PNG")
-    p.add_argument("--html", type=Path, metavar="PAGE.html",
+    p.add_argument("--html", type=Path, nargs="?", const=Path(), metavar="PAGE.html",
                    help="write the interactive page (a bench folder: the folder of its pages, default OUT/views)")
     p.add_argument("--run", action="append", default=[], metavar="[LABEL=]POSES.txt",
                    help="--html of a sequence: a run's KITTI poses (salo odometry's, a bench result's; its "
@@ -208,7 +208,7 @@ def _view_html(args, source: Path) -> int:
             if args.run or args.frames:
                 raise CommandError("--run and --frames apply to a sequence folder; a bench folder's pages show "
                                    "every method it ran")
-            out = args.html if args.html.suffix != ".html" else None
+            out = args.html if args.html != Path() and args.html.suffix != ".html" else None
             pages = view_html.bench_pages(source, max_points=args.max_points,
                                           on_page=lambda name: print(f"writing the page of {name}", flush=True))
             if not pages:
@@ -224,6 +224,8 @@ def _view_html(args, source: Path) -> int:
             return 0
         from simlidar.dataset import open_sequence
 
+        if args.html == Path():
+            raise CommandError(f"{source}: give the page's file, --html PAGE.html")
         total = len(open_sequence(source))
         frames = parse_frames(args.frames, total, str(source))
         n = frames_selected(total, frames)
