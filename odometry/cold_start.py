@@ -1,89 +1,88 @@
-"""The first registration of a sequence: standing still or the coarse estimate, whichever the scene says.
+"""The cold start: a sequence's first registration, which has no motion to extrapolate.
 
-The first registration has no motion to extrapolate. It starts from standing
-still and, since the sensor may already move by metres a frame, first runs a
-coarse pass (a wide bound, no trimming) whose estimate the ICP then refines.
-Where the scene pins every direction that pass walks to the motion. Where it
-pins one only through a few objects (rocks on flat open ground), the pass's
-wide, untrimmed matches can walk a standing start off by most of a metre
-along that direction; the ICP, with little to pull it back, stays there, and
-the motion prior carries that speed on through the sequence.
+The sensor may already move by metres a frame, beyond the correspondence bound, and the
+points that see it (few, in a corridor) would be trimmed first. So the first registration:
 
-With ``match.cold_start_from_rest`` (an option, off: over the suite's seeds it
-fixed such a start and lost as many highway starts, README) the ICP also
-refines standing still, and where the two results disagree,
-the points that see the disagreement decide (``choose_start``): those whose
-target plane at either estimate faces the direction d between them
-(``|n . d| > FACING_COS``). Their mean truncated point-to-plane cost is
-compared (each point's squared distance to the plane of its nearest target
-point, at most ``tau^2``, ``tau^2`` without one; ``tau`` three times the smaller
-RMS residual of the two). All points would not do: at standing still a
-sensor's scan lines fall where the target's fell, so on curved ground each
-point sits on its own earlier line and the residuals of the whole scan favour
-standing still even at 17 m/s; points on surfaces parallel to d (ground,
-rails) cannot tell the two apart anyway. Without such points, or on a tie,
-the coarse estimate is kept, as it always was.
+1. with poles on both sides, starts from the horizontal offset most of them agree on
+   (``poles.pole_translation``): where poles are the evidence along the road, a coarse pass
+   would let the rails' and the ground's sampling pattern (the same in both scans) pull it
+   back to standing still;
+2. otherwise runs a coarse registration first, with a wide bound and no trimming or GCR
+   (``match.initial_correspondence_distance_m``), and the ICP from its estimate;
+3. from the guess (standing still) when the coarse pass failed.
 
-Only for scans without per-point times. With them, both scans of the first
-registration are de-skewed as if standing still, and only the de-skew
-refinements that follow (``odometry.pipeline``) re-de-skew them with the
-estimate; before that, scans distorted by a metre of motion favour standing
-still (a highway start at 17 m/s: coarse 0.65 m, refined to 1.73 m by the
-re-de-skew; the facing points preferred standing still), so there the
-coarse estimate is kept.
+None of these holds the estimate to the guess (``motion_prior=False``): it is no known motion.
+A map variant registers against two targets, the map of the first scan and the first scan's
+own points and normals, and keeps the better constrained (``better_constrained``): a map of one
+scan has a normal only where two scan lines meet, which on open ground leaves the direction of
+travel to a few objects, while against the scan a sensor moving on weak ground is pulled towards
+standing still by the scans' rings falling on each other (docs/method.md).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .icp import RegistrationResult, Target, match
+from simlidar import se3
 
-# The truncation of the cost, in RMS residuals of the better-fitting registration.
-TRUNCATION_RMS = 3.0
-# A point sees the disagreement when its target plane's normal is within 60 deg of it.
-FACING_COS = 0.5
+from .config import OdometryConfig
+from .icp import NearestCache, RegistrationResult, Source, Target, register
+from .poles import pole_translation
+from .rejectors import Rejector
 
 
-def plane_costs(source_points: np.ndarray, T: np.ndarray, target: Target, direction: np.ndarray,
-                bound_m: float, tau_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per point of (M, 3) ``source_points`` moved by ``T`` (4, 4): its truncated point-to-plane cost, m^2,
-    and |n . direction| of its target plane (0 without one), both (M,).
+def coarse_config(config: OdometryConfig) -> OdometryConfig:
+    """The coarse pass's config: the wide initial bound, no trimming, no GCR."""
+    return config.replace(gcr={"enabled": False}, match={
+        "max_correspondence_distance_m": config.match.initial_correspondence_distance_m, "trim_fraction": 0.0})
 
-    A point costs ``min(r^2, tau^2)``, r its distance to the plane of its nearest target
-    point within ``bound_m``; ``tau^2`` with no neighbour there or no plane (a nan normal).
+
+def first_registration(source: Source, target: Target, T_init: np.ndarray, config: OdometryConfig,
+                       chain: list[Rejector], coarse: OdometryConfig, coarse_chain: list[Rejector],
+                       T_target_prev: np.ndarray, nearest: NearestCache | None = None
+                       ) -> tuple[RegistrationResult, list[RegistrationResult]]:
+    """A sequence's first registration of ``source`` on ``target`` from the guess ``T_init`` (4, 4).
+
+    chain: the rejectors (without GCR: it needs a close guess). coarse, coarse_chain: the coarse
+    pass's config (``coarse_config``) and rejectors. T_target_prev: (4, 4) the previous pose in the
+    target frame. nearest: the target's search cache. Returns the result and every run made.
     """
-    moved = source_points @ T[:3, :3].T + T[:3, 3]
-    m = match(moved, target, bound_m)  # (the ICP's own nearest-neighbour search and its cache)
-    cost = np.full(len(moved), tau_m * tau_m)
-    facing = np.zeros(len(moved))
-    if len(m):
-        normals = target.normals_at(m.target_index)
-        r = np.einsum("ij,ij->i", normals,
-                      moved.take(m.source_index, axis=0) - target.points.take(m.target_index, axis=0))
-        cost[m.source_index] = np.where(np.isfinite(r), np.minimum(r * r, tau_m * tau_m), tau_m * tau_m)
-        facing[m.source_index] = np.nan_to_num(np.abs(normals @ direction))
-    return cost, facing
+    runs: list[RegistrationResult] = []
+    if source.poles is not None and target.poles is not None:
+        moved = se3.transform_points(T_init, source.poles)
+        offset = pole_translation(moved, target.poles, config.match.initial_correspondence_distance_m)
+        if offset is not None:
+            T_start = T_init.copy()
+            T_start[:3, 3] += offset
+            result = register(source, target, T_start, config, chain, T_target_prev, motion_prior=False,
+                              nearest=nearest)
+            runs.append(result)
+            if not result.singular:
+                return result, runs
+    result = None
+    first = register(source, target, T_init, coarse, coarse_chain, T_target_prev, motion_prior=False, nearest=nearest)
+    runs.append(first)
+    if not first.singular:
+        result = register(source, target, first.T_target_source, config, chain, T_target_prev, motion_prior=False,
+                          nearest=nearest)
+        runs.append(result)
+    if result is None:
+        result = register(source, target, T_init, config, chain, T_target_prev, motion_prior=False, nearest=nearest)
+        runs.append(result)
+    return result, runs
 
 
-def choose_start(source_points: np.ndarray, target: Target, at_rest: RegistrationResult,
-                 coarse: RegistrationResult, bound_m: float) -> RegistrationResult:
-    """The refined standing start or the refined coarse estimate of (M, 3) ``source_points`` on ``target``.
-
-    ``at_rest`` wins only if the points facing the direction between the two fit it better
-    (module doc); a singular result loses. ``bound_m``: the cost's nearest-neighbour bound, m.
+def better_constrained(results: list[RegistrationResult]) -> int:
+    """Of first registrations against different targets, the index of the one whose weakest direction of
+    translation is best constrained: the largest smallest eigenvalue of its information per match
+    (``RegistrationResult.translation_eigenvalues``); a singular result only when all are; on a tie
+    the earlier. A registration that slid along a weakly constrained direction (a map of one scan on
+    open ground, whose single-ring ground has no normals) has the smaller one.
     """
-    if at_rest.singular or coarse.singular:
-        return coarse if at_rest.singular else at_rest
-    d = coarse.T_target_source[:3, 3] - at_rest.T_target_source[:3, 3]
-    apart = float(np.linalg.norm(d))
-    if not apart > 0:
-        return coarse
-    d = d / apart
-    tau = TRUNCATION_RMS * max(min(at_rest.rms_m, coarse.rms_m), 1e-3)
-    cost_rest, facing_rest = plane_costs(source_points, at_rest.T_target_source, target, d, bound_m, tau)
-    cost_coarse, facing_coarse = plane_costs(source_points, coarse.T_target_source, target, d, bound_m, tau)
-    seeing = (facing_rest > FACING_COS) | (facing_coarse > FACING_COS)
-    if not seeing.any():
-        return coarse
-    return at_rest if cost_rest[seeing].mean() < cost_coarse[seeing].mean() else coarse
+    def weakest(i: int) -> float:
+        w = float(results[i].translation_eigenvalues[0])
+        return -math.inf if results[i].singular or not math.isfinite(w) else w
+
+    return max(range(len(results)), key=weakest)  # (max keeps the first of equal keys)

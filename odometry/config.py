@@ -38,10 +38,9 @@ from paramspec import ParamError, Params, assignments, differences, param, secti
 from simlidar.yaml_file import read_yaml
 
 NOISE_MODELS = ("range", "isotropic")
-MATCH_TARGETS = ("filtered", "raw", "map")
+MATCH_TARGETS = ("filtered", "map")
 NCF_SCOPES = ("scan", "map", "both")
 WEAK_UPDATES = ("prior", "remap")
-COLD_START_TARGETS = ("scan", "map", "better")
 GCR_FORMULAS = ("beam", "paper")
 
 
@@ -71,15 +70,11 @@ class DeskewParams(_Stage):
     """De-skew: motion distortion corrected with per-point times, when the scan has them."""
 
     section_name = "deskew"
-    enabled: bool = param(True, "de-skew with the constant-velocity motion")
-    joint: bool = param(True, "re-de-skew the scan at every ICP step, halfway from its de-skew motion towards "
-                        "the estimate's (the damped update of the refinements, per step); false: only in the "
-                        "refinements after the ICP. The first registration of a sequence has refinements only")
+    enabled: bool = param(True, "de-skew with the constant-velocity motion; the scan is re-de-skewed at every "
+                          "ICP step, halfway from its de-skew motion towards the estimate's")
     refinements: int = param(1, "after the ICP, redo the de-skew with the frame's own motion and register again "
-                             "from its estimate, this many times (0: none)", min=0)
-    refinement_iterations: int | None = param(
-        None, "iteration cap of each refinement's ICP, which starts from the frame's estimate (null: "
-        "icp.max_iterations; 1: one Gauss-Newton step with the re-de-skewed points)", min=1)
+                             "from its estimate, this many times (0: none, faster; weakly constrained scenes "
+                             "drift more)", min=0)
 
 
 @dataclass(frozen=True)
@@ -95,10 +90,6 @@ class FilterParams(_Stage):
         "instead of its farther half (odometry/scan_lines.py; needs the sensor); null: plain kNN (the paper)",
         above=0.0)
     max_curvature: float = param(0.05, "PCL curvature above which a point is discarded", min=0.0)
-    source_voxel_size_m: float | None = param(
-        None, "scan-to-map: the ICP's source keeps one filtered point per voxel of this edge (the first in "
-        "voxel order) while the map takes every voxel centroid; null: every filtered point (scan-to-scan "
-        "always: its source and target are both every filtered point)", above=0.0)
     min_points: int = param(100, "fewer filtered points or matches: the frame is flagged, its pose extrapolated",
                             min=6)
 
@@ -128,16 +119,12 @@ class MatchParams(_Stage):
     """Matching and rejection: the target, the distance rejector and trimming."""
 
     section_name = "match"
-    target: str = param("filtered", "match against the previous filtered scan (Alg. 1), its raw (de-skewed) "
-                        "points, or a local map of recent scans", choices=MATCH_TARGETS)
+    target: str = param("filtered", "match against the previous filtered scan (Alg. 1) or a local map of recent "
+                        "scans", choices=MATCH_TARGETS)
     max_correspondence_distance_m: float = param(1.0, "the distance rejector's bound", above=0.0)
     initial_correspondence_distance_m: float = param(
         3.0, "bound of a coarse registration, untrimmed, before a sequence's first (it has no motion to "
         "extrapolate)", above=0.0)
-    cold_start_from_rest: bool = param(
-        False, "scans without per-point times: the first registration refines standing still as well as its coarse "
-        "estimate and keeps standing still where the points facing the difference fit it better "
-        "(odometry/cold_start.py); false: the coarse estimate")
     trim_fraction: float = param(0.2, "drop this fraction of the largest match distances (paper: 0.2)", min=0.0,
                                  below=1.0)
 
@@ -153,10 +140,6 @@ class MapParams(_Stage):
                                        "every point while its voxel has room)", min=0.0)
     max_distance_m: float | None = param(None, "map points farther than this from the sensor are dropped (null: "
                                          "clean.max_range_m)", above=0.0)
-    cold_start_target: str = param("better", "the first registration's target: scan, the first scan's points with "
-                                   "their own normals (as scan-to-scan); map, the map of that one scan; better: "
-                                   "both, keeping the registration whose weakest direction of translation is "
-                                   "better constrained", choices=COLD_START_TARGETS)
 
 
 @dataclass(frozen=True)
@@ -222,8 +205,8 @@ class OdometryConfig(Params):
 
     Each stage is a section (``cfg.ncf.max_normal_std_deg``; ``ncf:`` in YAML,
     ``ncf.max_normal_std_deg=3`` on the command line) whose keys are declared
-    with their bounds and help. Why the defaults are what they are: the README
-    ("The method, and our choices"). The ICP's termination (1 mm, 0.01 deg) is
+    with their bounds and help. Why the defaults are what they are:
+    docs/default-choices.md; why each key exists: docs/keys.md. The ICP's termination (1 mm, 0.01 deg) is
     an order below a frame's own error of about a centimetre: tighter only adds
     iterations. A prediction error of 1 m is 10 m/s^2 of sudden acceleration at
     10 Hz, ten times over. Rules between keys: ``clean.min_range_m`` <
@@ -255,10 +238,6 @@ class OdometryConfig(Params):
             if self.ncf.applies_to != "scan" and self.match.target != "map":
                 raise ConfigError(f"'{self.ncf.applies_to}' needs match.target: map (there is no map to judge)",
                                   "ncf.applies_to")
-            source_voxel = self.filter.source_voxel_size_m
-            if source_voxel is not None and source_voxel < self.filter.voxel_size_m:
-                raise ConfigError(f"must be at least filter.voxel_size_m ({source_voxel} < "
-                                  f"{self.filter.voxel_size_m})", "filter.source_voxel_size_m")
         except ConfigError as exc:
             raise exc.at(f"odometry config '{self.name}'") from None
 
@@ -282,7 +261,7 @@ NCF_MAP = NCF.replace(name="ncf-map", match={"target": "map"}, ncf={"applies_to"
 SALO_MAP = SALO.replace(name="salo-map", match={"target": "map"}, ncf={"applies_to": "map"}, poles={"enabled": True})
 VARIANTS = {c.name: c for c in (BL, NCF, SALO, BL_MAP, NCF_MAP, SALO_MAP)}
 # What ``salo odometry`` runs without --variant (chosen on the generalisation suite's tuning
-# seeds; README "The method, and our choices").
+# seeds; docs/default-choices.md).
 DEFAULT_VARIANT = "salo-map"
 
 
@@ -298,12 +277,37 @@ def variant_changes() -> dict[str, dict]:
     return {name: {k: v for k, v in differences(c, SALO).items() if k != "name"} for name, c in VARIANTS.items()}
 
 
+# Keys that were measured, not kept, and removed; what a config that still sets one is told.
+REMOVED_KEYS = {
+    "filter.source_voxel_size_m": "the source thinned to a coarser voxel lost accuracy on the tuning seeds",
+    "match.cold_start_from_rest": "refining standing still at the cold start moved highway starts both ways",
+    "deskew.refinement_iterations": "capping a refinement's ICP raised the tuning seeds' mean t_err",
+    "deskew.joint": "the de-skew is redone at every ICP step, always",
+    "map.cold_start_target": "a map variant's cold start registers against both the map and the scan, always",
+}
+
+
+def refuse_removed_keys(data: Any, origin: str) -> None:
+    """ConfigError when a YAML-style mapping sets a key of ``REMOVED_KEYS`` (or ``match.target: raw``)."""
+    if not isinstance(data, dict):
+        return
+    record = "docs/default-choices.md, 'Measured and not kept'"
+    for dotted, why in REMOVED_KEYS.items():
+        section, key = dotted.split(".")
+        if isinstance(data.get(section), dict) and key in data[section]:
+            raise ConfigError(f"was removed ({why}; {record})", dotted).at(origin)
+    if isinstance(data.get("match"), dict) and data["match"].get("target") == "raw":
+        raise ConfigError(f"'raw' was removed (a raw scan as the target: {record}); use filtered or map",
+                          "match.target").at(origin)
+
+
 def changes_from_assignments(pairs, origin: str = "--set") -> dict:
     """``KEY=VALUE`` texts with dotted keys (``ncf.max_normal_std_deg=3``) -> the changes, nested by stage
     as a config YAML holds them, each value converted and checked by its key's declaration.
     Overlay them with ``config_from_dict(changes, base=...)``. Raises ConfigError naming the key."""
-    return OdometryConfig.schema().read(assignments(pairs, origin), origin, coerce=True, partial=True,
-                                        error=ConfigError)
+    given = assignments(pairs, origin)
+    refuse_removed_keys(given, origin)
+    return OdometryConfig.schema().read(given, origin, coerce=True, partial=True, error=ConfigError)
 
 
 def config_from_dict(data: Any, base: OdometryConfig | None = None, origin: str = "config", *,
@@ -313,6 +317,7 @@ def config_from_dict(data: Any, base: OdometryConfig | None = None, origin: str 
     base: default the variant named in ``data``, else salo. coerce: the values
     may be command-line text (``paramspec.assignments``). Errors name ``origin``.
     """
+    refuse_removed_keys(data, origin)
     if base is None:
         name = data.get("name") if isinstance(data, dict) else None
         base = variant(name) if name in VARIANTS else SALO

@@ -30,12 +30,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import constraint_information
+from simlidar.degeneracy import plane_jacobian
+
+from .kernels.plane_system import constraint_information
 
 
 def constraint_rows(points: np.ndarray, normals: np.ndarray, rotation_scale_m: float) -> np.ndarray:
     """(N, 6) scaled rows ``[n, (p x n) / L]`` of (N, 3) points and unit normals."""
-    return np.hstack([normals, np.cross(points, normals) / rotation_scale_m])
+    J = np.ascontiguousarray(plane_jacobian(points, normals).T)
+    J[:, 3:] /= rotation_scale_m
+    return J
 
 
 def scale_matrix(rotation_scale_m: float) -> np.ndarray:

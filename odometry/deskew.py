@@ -11,12 +11,16 @@ wheel odometry); the simulator's ``true_xyz`` is the exact answer to check it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simlidar import se3
 
-from .kernels import rescrew_motion, screw_motion
+from .kernels.screw import rescrew_motion, screw_motion
+
+if TYPE_CHECKING:
+    from .filters import FilteredScan
 
 
 def screw_apply(xi: np.ndarray, s: np.ndarray, points: np.ndarray, rotate_only: bool = False) -> np.ndarray:
@@ -36,7 +40,7 @@ def screw_apply(xi: np.ndarray, s: np.ndarray, points: np.ndarray, rotate_only: 
 def _screw(xi: np.ndarray, s: np.ndarray, points: np.ndarray | None, normals: np.ndarray | None
            ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """``screw_apply`` of (N, 3) points and the rotation alone of (N, 3) normals (either may be None),
-    in one compiled pass (``odometry.kernels.screw_motion``)."""
+    in one compiled pass (``odometry.kernels.screw.screw_motion``)."""
     xi = np.asarray(xi, dtype=np.float64)
     if points is None and normals is None:
         return None, None
@@ -83,7 +87,7 @@ class RedeskewMemo:
     step, each time from the twist the last one de-skewed it with).
 
     twist: (6,) the twist it de-skewed with; fractions: (M,) its points' times over the frame period;
-    scalars: (M, 4) their ``kernels.rescrew_motion`` scalars of that twist (cosine, sine and the left
+    scalars: (M, 4) their ``kernels.screw.rescrew_motion`` scalars of that twist (cosine, sine and the left
     Jacobian's two factors), which undoing it takes again. None before the first.
     """
 
@@ -131,3 +135,31 @@ def twist_of(motion: np.ndarray) -> np.ndarray:
     """(6,) the twist of a (4, 4) motion (``se3.log``), or the (6,) twist given."""
     motion = np.asarray(motion, dtype=np.float64)
     return motion if motion.shape == (6,) else se3.log(motion)
+
+
+def redeskew_scan(scan: FilteredScan, old_motion: np.ndarray, new_motion: np.ndarray, period_s: float,
+                  centroids_motion: np.ndarray | None = None, memo: RedeskewMemo | None = None) -> None:
+    """Re-do the de-skew of a filtered scan's points, normals and poles with a better motion (in place).
+
+    The centroids (what a map takes) move with the points when they are the points. Otherwise
+    they move only when ``centroids_motion`` (4, 4), the motion they are de-skewed with now, is
+    given: the de-skew refinements leave them, since only the frame's final motion matters to the map.
+    Motions are (4, 4) transforms or their (6,) twists (``redeskew``). memo: the points'
+    ``RedeskewMemo`` (``redeskew``), kept by whoever re-de-skews this scan again and again.
+    """
+    same = scan.points is scan.centroids  # (the ICP points are the centroids: move them once)
+    old_motion, new_motion = twist_of(old_motion), twist_of(new_motion)  # (once for every array moved)
+    # (a scan registered against a map has no normals of its own: nan rows, which stay nan)
+    without_normals = len(scan.normals) > 0 and bool(np.isnan(scan.normals[:, 0]).all())
+    scan.points, normals = redeskew(scan.points, None if without_normals else scan.normals, scan.times_s,
+                                    old_motion, new_motion, period_s, memo)
+    if not without_normals:
+        scan.normals = normals
+    poles = scan.poles
+    if poles is not None and poles.times_s is not None and len(poles):
+        poles.points, _ = redeskew(poles.points, None, poles.times_s, old_motion, new_motion, period_s)
+    if same:
+        scan.centroids = scan.points
+    elif centroids_motion is not None and scan.centroid_times_s is not None and len(scan.centroids):
+        scan.centroids, _ = redeskew(scan.centroids, None, scan.centroid_times_s, centroids_motion, new_motion,
+                                     period_s)

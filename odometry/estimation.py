@@ -19,7 +19,7 @@ import numpy as np
 from simlidar import se3
 
 from .constraints import remapped_step
-from .kernels import plane_normal_equations
+from .kernels.plane_system import plane_normal_equations
 
 
 @dataclass
@@ -64,7 +64,7 @@ def plane_step(H: np.ndarray, g: np.ndarray, sum_r2: float, n: int, rcond: float
                min_eigenvalue: float = 0.0, rotation_scale_m: float = 10.0, mode: str = "remap",
                deviation: np.ndarray | None = None) -> PlaneStep:
     """``point_to_plane_step`` from its system: H (6, 6) ``J^T J``, g (6,) ``J^T r`` and the sum of r^2
-    (m^2) of n matches (``odometry.kernels.plane_normal_equations``)."""
+    (m^2) of n matches (``odometry.kernels.plane_system.plane_normal_equations``)."""
     solve = remapped_step(H, g, n, rotation_scale_m, min_eigenvalue, rcond, mode, deviation)
     return PlaneStep(se3.exp(solve.xi), solve.xi, H, solve.rank, float(np.sqrt(sum_r2 / n)) if n else 0.0,
                      solve.remapped)

@@ -14,7 +14,7 @@ import math
 import os
 import threading
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,13 +23,12 @@ from simlidar.sensor import LidarModel
 
 from .config import OdometryConfig
 from .constraints import restore_constraints
-from .deskew import RedeskewMemo
 from .kdtree import KDTree
 from .ncf import IsotropicNoise, RangeNoise, normal_covariance_filter
 from .normals import knn, neighbourhood_pca
 from .poles import Poles
 from .scan_lines import widen_one_ring_neighbourhoods
-from .voxels import first_per_voxel, voxel_centroids
+from .voxels import voxel_centroids
 
 _background: dict[tuple[int, str], ThreadPoolExecutor] = {}
 _background_lock = threading.Lock()
@@ -72,12 +71,7 @@ class FilteredScan:
     counts: points after each stage: raw, voxels, ncf, curvature, and "restored"
         (NCF-rejected points kept for a direction they alone constrain).
     seconds: time spent per stage.
-    points_tree: (the points it was started on, a future of the k-d tree over them), started on the
-        background thread when the scan becomes the next scan-to-scan target; None before.
     poles: the scan's poles (``odometry.poles``), de-skewed as ``points`` are, or None (not extracted).
-    centroid_rows: (M,) the row of ``centroids`` each point is, when the points are the centroids thinned
-        (``filter.source_voxel_size_m``), else None.
-    points_redeskew: what the last re-de-skew of ``points`` leaves the next (``deskew.redeskew``).
     """
 
     points: np.ndarray
@@ -91,23 +85,10 @@ class FilteredScan:
     centroid_times_s: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
     seconds: dict = field(default_factory=dict)
-    points_tree: tuple[np.ndarray, Future] | None = None
     poles: Poles | None = None
-    centroid_rows: np.ndarray | None = None
-    points_redeskew: RedeskewMemo = field(default_factory=RedeskewMemo)
 
     def __len__(self) -> int:
         return len(self.points)
-
-    def start_points_tree(self) -> None:
-        """Build the k-d tree over ``points`` on the background thread (``points_tree``)."""
-        self.points_tree = (self.points, background().submit(KDTree, self.points))
-
-    def tree_of_points(self) -> KDTree:
-        """The k-d tree over ``points``: the one started by ``start_points_tree`` unless they moved since."""
-        if self.points_tree is not None and self.points_tree[0] is self.points:
-            return self.points_tree[1].result()
-        return KDTree(self.points)
 
 
 def ncf_noise_model(config: OdometryConfig, sensor_range_noise_std_m: float | None):
@@ -144,33 +125,8 @@ def filter_scan(
     rings), or None. raw_times_s: (N,) firing times, s, or None (the centroids' mean times).
     When the scan's normals are not needed (``scan_normals_needed``, unless ``with_normals``
     says otherwise), the ICP points are the voxel centroids themselves, with nan normals, no
-    rings and no raw k-d tree. With ``filter.source_voxel_size_m`` (scan-to-map), the ICP points
-    are thinned to the first per voxel of that edge; ``centroids``, what the map takes, keep all.
+    rings and no raw k-d tree.
     """
-    scan = _filter_scan(raw_points, config, raw_rings, sensor, raw_times_s, with_normals)
-    if config.filter.source_voxel_size_m is not None and config.match.target == "map":
-        t = time.perf_counter()
-        rows = first_per_voxel(scan.points, config.filter.source_voxel_size_m)
-        if scan.points is scan.centroids:
-            scan.centroid_rows = rows
-        scan.points, scan.normals = scan.points[rows], scan.normals[rows]
-        scan.normal_std_rad = scan.normal_std_rad[rows]
-        scan.rings = None if scan.rings is None else scan.rings[rows]
-        scan.times_s = None if scan.times_s is None else scan.times_s[rows]
-        scan.counts["source"] = len(rows)
-        scan.seconds["voxel"] = scan.seconds.get("voxel", 0.0) + time.perf_counter() - t
-    return scan
-
-
-def _filter_scan(
-    raw_points: np.ndarray,
-    config: OdometryConfig,
-    raw_rings: np.ndarray | None = None,
-    sensor: LidarModel | None = None,
-    raw_times_s: np.ndarray | None = None,
-    with_normals: bool | None = None,
-) -> FilteredScan:
-    """``filter_scan`` before the source thinning."""
     seconds: dict[str, float] = {}
     t = time.perf_counter()
     if not (scan_normals_needed(config) if with_normals is None else with_normals):

@@ -65,7 +65,7 @@ from typing import Literal
 
 import numpy as np
 
-from .kernels import neighbour_beam_distance_table, row_max_with_floor
+from .kernels.gcr import neighbour_beam_distance_table, row_max_with_floor
 
 KITTI_VERTICAL_ANGLE_CORRECTION_DEG = 0.205
 

@@ -20,7 +20,8 @@ from .config import OdometryConfig
 from .constraints import restore_constraints, weakest_translation
 from .estimation import plane_step
 from .kdtree import KDTree
-from .kernels import more_plane_rows, plane_gate, plane_normal_equations, reusable_matches, standard_rejection_system
+from .kernels.nearest import reusable_matches
+from .kernels.plane_system import more_plane_rows, plane_gate, plane_normal_equations, standard_rejection_system
 from .poles import PoleTarget, pole_rows
 from .rejectors import Matches, Rejector, distance_rejector, geometric_rejector, standard_chain, trimmed_rejector
 
@@ -46,7 +47,8 @@ class Source:
 
 @dataclass
 class NearestCache:
-    """A target's last searched nearest neighbours, which later queries can reuse without a search.
+    """The last nearest-neighbour search against one target, which later queries can reuse without a
+    search (``match``). Kept by the caller for one target, whose points must not change; empty at first.
 
     points: (M, 3) the query points searched, target frame, m. index: (M,) the nearest target row
     of each (the target's N where none lay within the bound). clear_m: (M,) no other target point
@@ -54,10 +56,10 @@ class NearestCache:
     bound_m: the search's distance bound, m.
     """
 
-    points: np.ndarray
-    index: np.ndarray
-    clear_m: np.ndarray
-    bound_m: float
+    points: np.ndarray | None = None
+    index: np.ndarray | None = None
+    clear_m: np.ndarray | None = None
+    bound_m: float = math.nan
 
 
 # Margin of the reuse test, m: far above the rounding of distances of a few hundred metres
@@ -76,7 +78,6 @@ class Target:
     marks normals the NCF found too uncertain (a map's): the ICP drops those matches
     unless they are the last evidence of a direction (``odometry.constraints``).
     ``known`` (N,) marks the rows estimated (both may be shared with a map's cache).
-    ``nearest``: the last nearest-neighbour search against it (``match``); its points must not change.
     ``poles``: poles to match the source's against (``odometry.poles``), or None.
     """
 
@@ -86,7 +87,6 @@ class Target:
     estimate_normals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]] | None = None
     known: np.ndarray | None = None
     uncertain: np.ndarray | None = None
-    nearest: NearestCache | None = None
     poles: PoleTarget | None = None
 
     def normals_at(self, index: np.ndarray) -> np.ndarray:
@@ -151,24 +151,26 @@ def rejectors_for(config: OdometryConfig) -> list[Rejector]:
     return chain
 
 
-def match(points: np.ndarray, target: Target, max_distance_m: float) -> Matches:
+def match(points: np.ndarray, target: Target, max_distance_m: float, cache: NearestCache | None = None) -> Matches:
     """Nearest target point of each (M, 3) point within ``max_distance_m``, m (k-d tree, all cores).
 
     The ICP's query points move by millimetres from one iteration (or de-skew refinement)
     to the next, so most keep their nearest target point, and that can be proven without a
     search: a point moved by ``s`` from where its nearest was found at distance ``d``, with
     no other target point within ``c`` of it then, is now within ``d + s`` of that one and
-    beyond ``c - s`` of every other. The search (two nearest, for ``c``) is redone only
-    for points where ``d + s < c`` fails or that had no neighbour within the bound. The
-    answer is the search's: the same neighbours and the same distances (a point with two
-    target points at one distance is always searched again, and either may be named).
+    beyond ``c - s`` of every other. With a ``cache`` of the last search against this target
+    the search (two nearest, for ``c``) is redone only for points where ``d + s < c`` fails
+    or that had no neighbour within the bound, and the cache is updated. The answer is the
+    search's: the same neighbours and the same distances (a point with two target points at
+    one distance is always searched again, and either may be named).
     """
     points = np.asarray(points, dtype=np.float64)
     n = len(target.points)
-    cache = target.nearest
-    if cache is None or cache.bound_m != max_distance_m or len(cache.points) != len(points):
-        cache = target.nearest = NearestCache(points.copy(), np.full(len(points), n, dtype=np.intp),
-                                              np.zeros(len(points)), max_distance_m)
+    if cache is None:
+        cache = NearestCache()
+    if cache.points is None or cache.bound_m != max_distance_m or len(cache.points) != len(points):
+        cache.points, cache.index = points.copy(), np.full(len(points), n, dtype=np.intp)
+        cache.clear_m, cache.bound_m = np.zeros(len(points)), max_distance_m
         redo = np.arange(len(points))
         dist = np.full(len(points), np.inf)
     else:
@@ -262,6 +264,7 @@ def register(
     T_target_previous: np.ndarray | None = None,
     motion_prior: bool = True,
     reskew: Callable[[np.ndarray], np.ndarray] | None = None,
+    nearest: NearestCache | None = None,
 ) -> RegistrationResult:
     """Alg. 1's loop: estimate ``T_target_source`` starting from ``T_init`` (4, 4).
 
@@ -283,6 +286,8 @@ def register(
     ``reskew(T) -> (6,) twist``: after each step, re-de-skews the source (its points and poles, in
     place) for the estimate ``T`` and returns how far the de-skew motion moved (``deskew.joint``);
     the loop ends when both the step and that are below the termination thresholds.
+    ``nearest``: the cache of the last search against ``target`` (``match``), kept by the caller
+    across the registrations of one frame against it (its matches move by millimetres).
     """
     rejectors = rejectors_for(config) if rejectors is None else rejectors
     T = np.array(T_init, dtype=float)
@@ -295,7 +300,7 @@ def register(
     for it in range(1, config.icp.max_iterations + 1):
         t0 = time.perf_counter()
         moved = source.points @ T[:3, :3].T + T[:3, 3]
-        m = match(moved, target, bound)
+        m = match(moved, target, bound, nearest)
         t1 = time.perf_counter()
         keep, gate = usable_planes(m, target, moved, centre, config)
         counts = {"candidates": len(source.points), **gate}

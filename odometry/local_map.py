@@ -35,7 +35,8 @@ import numpy as np
 from .filters import background
 from .icp import Target
 from .kdtree import KDTree
-from .kernels import gathered_scatter, keys_near, map_normal_verdicts, within_reach_of_any
+from .kernels.normals import gathered_scatter, map_normal_verdicts
+from .kernels.voxel_hash import keys_near, within_reach_of_any
 from .ncf import DEFAULT_GAP_SIGNIFICANCE_Z, DEGENERATE_GAP, ncf_keep
 from .normals import knn, symmetric_eigh_descending
 from .voxels import neighbour_key_steps, voxel_centres, voxel_keys

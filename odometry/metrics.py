@@ -39,7 +39,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from simlidar import se3
 
@@ -342,6 +341,8 @@ def relative_pose_errors(
     E = se3.inverse(gt_rel) @ est_rel
     # Per-frame rotation errors are tiny, where arccos of the trace loses digits;
     # scipy's quaternion route keeps them.
+    from scipy.spatial.transform import Rotation  # (not at import: start-up)
+
     r = Rotation.from_matrix(E[:, :3, :3]).magnitude() if len(E) else np.zeros(0)
     return RelativePoseErrors(i, j, np.linalg.norm(E[:, :3, 3], axis=1), np.asarray(r))
 

@@ -112,7 +112,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import beam_noise_moments, range_noise_moments, tangent_covariance_in_frame
+from .kernels.ncf import beam_noise_moments, range_noise_moments, tangent_covariance_in_frame
 from .normals import NormalEstimate, local_pca
 
 # The error-budget c_tau (module notes, "Threshold"): a 3 deg 1-sigma tilt of the normal in its

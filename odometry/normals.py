@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kdtree import KDTree
-from .kernels import eigh3_closed_form, neighbourhood_scatter
+from .kernels.normals import eigh3_closed_form, neighbourhood_scatter
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ def symmetric_eigh_descending(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Returns (w (M, 3), V (M, 3, 3)) with ``A = V diag(w) V^T``, columns of V the
     eigenvectors, ``det V = +1``; nan for matrices with non-finite entries.
 
-    Closed form, compiled (``odometry.kernels.eigh3_closed_form``; several times faster
+    Closed form, compiled (``odometry.kernels.normals.eigh3_closed_form``; several times faster
     than a LAPACK call per matrix): the eigenvalues from the trigonometric solution of the
     characteristic cubic; v_2 (smallest) as the longest cross product of two
     rows of ``A - lambda_2 I``; v_0, v_1 from the 2 x 2 problem in the plane

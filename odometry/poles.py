@@ -15,7 +15,7 @@ the peers too, stayed near its start on those highways.
 What. Along each ring of the scan's range image (``odometry.scan_lines``), a
 *pole* is a run of returns at about one range, at most ``poles.max_width_m``
 across, with the returns beside it on both sides clearly farther
-(``kernels.foreground_runs``): a post, a pole, a trunk, a sign's leg seen
+(``kernels.poles.foreground_runs``): a post, a pole, a trunk, a sign's leg seen
 against the land behind it. Its centroid is a point of the object; seen from
 another place, the same object gives a centroid within a few centimetres of it
 horizontally (the run's height depends on the ring, so only the horizontal
@@ -42,7 +42,7 @@ import numpy as np
 from simlidar import se3
 
 from .kdtree import KDTree
-from .kernels import consensus_votes, foreground_runs
+from .kernels.poles import consensus_votes, foreground_runs
 from .scan_lines import range_image
 
 # A run's returns are at one range within this (m, and a fraction of the range: noise and the

@@ -5,7 +5,7 @@ registration's source (``odometry.icp.Source``), which carries what a rejector
 may need beyond the distances (the GCR's per-point thresholds). The ICP applies
 them in order, each to the matches the previous ones kept. The chain the ICP's
 configuration makes (``StandardChain``: distance, GCR, trimming) it runs as one
-compiled pass with the normal equations (``odometry.kernels.standard_rejection_system``:
+compiled pass with the normal equations (``odometry.kernels.plane_system.standard_rejection_system``:
 the same matches kept, save which of several at the trimming's cut distance), any other
 chain one rejector after another.
 """

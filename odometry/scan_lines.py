@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import adjacent_ring_neighbourhoods, fill_range_image
+from .kernels.range_image import adjacent_ring_neighbourhoods, fill_range_image
 
 
 def azimuth_columns(points: np.ndarray, n_columns: int) -> np.ndarray:
@@ -77,7 +77,7 @@ def widen_one_ring_neighbourhoods(
     idx = np.ascontiguousarray(neighbour_indices, dtype=np.intp)
     rings = np.ascontiguousarray(rings, dtype=np.int64)  # a driver's uint16 rings would wrap at ring - 1
     image = range_image(rings, cloud, n_rings, n_columns)
-    # (one compiled pass over the neighbourhoods: ``kernels.adjacent_ring_neighbourhoods`` has the rule)
+    # (one compiled pass over the neighbourhoods: ``kernels.range_image.adjacent_ring_neighbourhoods`` has the rule)
     return adjacent_ring_neighbourhoods(np.ascontiguousarray(cloud, dtype=np.float64), rings, image,
                                         np.ascontiguousarray(query_points, dtype=np.float64), idx,
                                         float(max_distance_m))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import group_keys, packed_voxel_keys, voxel_sums
+from .kernels.voxel_hash import group_keys, packed_voxel_keys, voxel_sums
 
 _KEY_BITS = 21  # voxel index bits per axis: +-2^20 voxels
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
@@ -61,10 +61,3 @@ def voxel_centroids(points: np.ndarray, voxel_size_m: float, values: np.ndarray 
     if values is None:
         return sums / counts[:, None]
     return sums / counts[:, None], value_sums / counts
-
-
-def first_per_voxel(points: np.ndarray, voxel_size_m: float) -> np.ndarray:
-    """(N, 3) points -> sorted rows of the first point (in row order) in each occupied cubic voxel."""
-    if len(points) == 0:
-        return np.zeros(0, dtype=np.intp)
-    return np.sort(np.unique(voxel_keys(points, voxel_size_m), return_index=True)[1])

@@ -20,12 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """(N, 3) points and (N, 3) unit normals -> (6, 6) sum of J^T J (translation, rotation)."""
+def plane_jacobian(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(6, N) the point-to-plane Jacobian ``J = [n, p x n]`` of (N, 3) points and unit normals, one row of
+    the result per column of J (translation, then rotation), m."""
     p, n = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
-    # The 6 Jacobian columns as contiguous rows, summed by einsum's own loop: np.cross and np.hstack
-    # copied twice as much, and BLAS on (6, N) x (N, 6) took 2 to 100 times longer on a loaded machine
-    # (its threads wait for cores).
+    # (as contiguous rows: np.cross and np.hstack copied twice as much)
     J = np.empty((6, len(p)))
     J[:3] = n.T
     px, py, pz = p.T
@@ -36,6 +35,14 @@ def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     J[4] -= px * nz
     np.multiply(px, ny, out=J[5])
     J[5] -= py * nx
+    return J
+
+
+def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, 3) points and (N, 3) unit normals -> (6, 6) sum of J^T J (translation, rotation)."""
+    # (summed by einsum's own loop: BLAS on (6, N) x (N, 6) took 2 to 100 times longer on a loaded
+    # machine, its threads waiting for cores)
+    J = plane_jacobian(points, normals)
     return np.einsum("in,jn->ij", J, J)
 
 

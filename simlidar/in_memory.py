@@ -14,8 +14,9 @@ What a frame carries is chosen with ``fields``:
   sidecar gives them (the same float64 times: an odometry run gives the same
   poses on the frames in memory as on the folder);
 - ``"truth"``: the whole per-point record a folder's reader gives
-  (``simlidar.formats.truth.SIDECAR_DTYPE``: true range, point, normal, object),
-  for studies that judge against the truth (50 bytes a return: short sequences);
+  (``simlidar.formats.truth.SIDECAR_DTYPE``: true range, point, normal, object, and
+  ``weather`` when the sensor has weather), for studies that judge against the
+  truth (50 bytes a return: short sequences);
 - ``"real"``: nothing beyond x, y, z, as real KITTI scans (rings must then
   come from the elevation, and there are no per-point times to de-skew with).
 
@@ -131,7 +132,8 @@ def simulate_in_memory(
             extra.append(scan.sidecar())
         else:
             extra.append(None)
-        degen.append(degeneracy(scan.true_xyz, scan.normal))
+        surface = scan.surface_returns  # the world's figures: returns off a surface
+        degen.append(degeneracy(scan.true_xyz[surface], scan.normal[surface]))
         if on_frame is not None:
             on_frame(k)
     rel = se3.inverse(poses[0]) @ poses

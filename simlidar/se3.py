@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 def hat(w: np.ndarray) -> np.ndarray:
@@ -136,6 +135,8 @@ def exp(xi: np.ndarray) -> np.ndarray:
     rho, omega = xi[..., :3], xi[..., 3:]
     if xi.shape == (6,):
         return make(_rotation_of_rotvec(omega), _v_matrix_of(omega) @ rho)
+    from scipy.spatial.transform import Rotation  # (not at import: scipy.spatial is most of a short run's start-up)
+
     R = Rotation.from_rotvec(omega.reshape(-1, 3)).as_matrix().reshape(omega.shape[:-1] + (3, 3))
     t = np.einsum("...ij,...j->...i", _v_matrix(omega), rho)
     return make(R, t)
@@ -148,6 +149,8 @@ def log(T: np.ndarray) -> np.ndarray:
         omega = _rotvec_of_rotation(T[:3, :3])
         return np.concatenate([np.linalg.solve(_v_matrix_of(omega), T[:3, 3]), omega])
     R = T[..., :3, :3]
+    from scipy.spatial.transform import Rotation
+
     omega = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(R.shape[:-2] + (3,))
     rho = np.linalg.solve(_v_matrix(omega), T[..., :3, 3][..., None])[..., 0]
     return np.concatenate([rho, omega], axis=-1)

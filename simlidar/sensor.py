@@ -33,6 +33,7 @@ import yaml
 from paramspec import Param, ParamError, Params, Section, param, schema, section
 
 from .imu import ImuModel
+from .weather import ReceiverParams, Weather
 from .yaml_file import read_yaml
 
 
@@ -91,14 +92,17 @@ class LidarModel(Params):
                                        min=0.0, max=5.0)
     beam_subrays: int = param(16, "sub-rays over the divergence cone (a sunflower pattern: equal areas)", min=2,
                               max=256)
-    return_mode: str = param("strongest", "the echo a divergent beam reports: strongest (most power), first "
-                             "(nearest) or last (farthest)", choices=("strongest", "first", "last"))
+    return_mode: str = param("strongest", "the echo a beam reports when it has several (a divergent beam's, or a "
+                             "surface's and the weather's): strongest (most power), first (nearest) or last "
+                             "(farthest)", choices=("strongest", "first", "last"))
     echo_separation_m: float = param(0.5, "sub-ray hits nearer each other in range than this form one echo, at "
                                      "their power-weighted mean range (the pulse's range resolution)", min=0.0)
     incidence_noise_max_factor: float = param(1.0, "range noise std grows as range_noise_std_m / cos(incidence), up "
                                               "to this factor (1: off)", min=1.0)
     intensity_incidence_exponent: float = param(1.0, "k in intensity = reflectance x |cos incidence|^k x falloff "
                                                 "(1: Lambertian)", min=0.0)
+    receiver: ReceiverParams = section(ReceiverParams)
+    weather: Weather = section(Weather)
     imu: ImuModel = section(ImuModel)
     description: str = param("", "free text")
     source: str = param("", "where the figures come from")
@@ -203,6 +207,10 @@ class LidarModel(Params):
         """A new validated model with some fields replaced (e.g. ``range_noise_std_m``)."""
         return dataclasses.replace(self, **changes)
 
+    def clear_air(self) -> LidarModel:
+        """The same sensor without weather (its receiver kept): what a method under test is told of it."""
+        return self if not self.weather.on else dataclasses.replace(self, weather=Weather())
+
     # ---- YAML ----
     def to_dict(self) -> dict:
         out = {
@@ -228,6 +236,10 @@ class LidarModel(Params):
             if getattr(self, key) != defaults[key] or (key in ("beam_subrays", "return_mode", "echo_separation_m")
                                                         and self.beam_divergence_deg > 0):
                 out[key] = getattr(self, key)
+        if self.receiver != ReceiverParams():
+            out["receiver"] = dataclasses.asdict(self.receiver)
+        if self.weather.to_dict():
+            out["weather"] = self.weather.to_dict()
         if self.azimuth_offsets_deg is not None:
             out["azimuth_offsets_deg"] = list(self.azimuth_offsets_deg)
         if self.imu.enabled:  # the IMU's keys, all of them, only when it is on
@@ -255,6 +267,10 @@ def _check_rules(m: LidarModel) -> None:
     if (m.rings - 1) * m.laser_interval_s >= m.column_period_s + 1e-12:
         raise SensorError(f"is too long: {m.laser_interval_s} s x {m.rings} lasers does not fit in one column "
                           f"({m.column_period_s:.3e} s at this azimuth step and rotation rate)", "laser_interval_s")
+    if m.weather.on and not m.receiver.enabled:
+        on = [k for k in ("fog", "rain", "snow") if getattr(m.weather, k).enabled]
+        raise SensorError(f"is false, but weather ({', '.join(on)}) acts on the received power: set receiver.enabled "
+                          "(and its detection_range_m)", "receiver.enabled")
 
 
 def _file_keys() -> Section:
@@ -272,7 +288,7 @@ def _file_keys() -> Section:
              angles, pitch, lowest, "azimuth_offsets_deg", "laser_interval_s", "start_azimuth_deg",
              "ring_bias_std_m", "angular_jitter_deg", "dropout_probability", "intensity_range_ref_m",
              "beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m", "incidence_noise_max_factor",
-             "intensity_incidence_exponent", "imu", "description", "source"]
+             "intensity_incidence_exponent", "receiver", "weather", "imu", "description", "source"]
     members = tuple(model[k] if isinstance(k, str) else k for k in order)
     return Section("sensor", members, "a spinning lidar's rings, timing, ranges and noise", LidarModel)
 

@@ -34,6 +34,17 @@ min(1, (r_ref / r)^2)``, with ``a`` the angle of incidence, ``k`` the sensor's
 ``intensity_incidence_exponent`` (1: Lambertian), ``r_ref`` its
 ``intensity_range_ref_m`` and the reflectance per object (``World.reflectance``,
 by default from its label); values in [0, 1].
+
+Receiver and weather (``simlidar.weather``, off by default): with the sensor's
+``receiver`` on, each beam's echoes have a received power and only those above
+the receiver's threshold are detected; the weather (fog, rain, snow) attenuates
+them and adds echoes of its own, and the return mode picks the one the beam
+reports. Each beam's weather draws come from a generator of the block's own
+(seeded with (seed, 2, frame, block)), apart from the range noise's. A surface's
+intensity is then the model's above times the overlap and the air's two-way
+transmission; a weather echo's is its power times ``min(r, r_ref)^2``. The truth
+of a weather return (``Scan.weather`` > 0) keeps the surface its beam reached,
+if any (true range, point, normal, object); without one, NaN and object -1.
 """
 
 from __future__ import annotations
@@ -43,11 +54,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import se3
-from .formats.truth import SIDECAR_DTYPE
+from .formats.truth import SIDECAR_DTYPE, sidecar_dtype
 from .inside import InsideProbe, SensorInsideGeometry, probe
 from .raycast import CompactHits, Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
+from .weather import SURFACE, WeatherModel
 from .world import World
 
 __all__ = ["SIDECAR_DTYPE", "Scan", "SensorInsideGeometry", "SweepSimulator"]
@@ -71,6 +83,9 @@ class Scan:
     object_id: (N,) int32 id of the hit object.
     motion: (C + 1, 4, 4) the sensor's pose at the start of each firing column (and at the sweep's
         end) in the reference frame, ``T_ref^-1 T_fire``; None without motion distortion (identity).
+    weather: (N,) uint8 what each return is (``simlidar.weather.KINDS``: 0 a surface, 1 fog, 2 rain,
+        3 snow), or None when the sensor has no weather. A weather return's true range, point, normal
+        and object are those of the surface its beam reached (NaN and -1 when it reached none).
     """
 
     xyz: np.ndarray
@@ -84,13 +99,20 @@ class Scan:
     normal: np.ndarray
     object_id: np.ndarray
     motion: np.ndarray | None = None
+    weather: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.xyz)
 
+    @property
+    def surface_returns(self) -> slice | np.ndarray:
+        """The returns that measured a surface (an index: all of them without weather)."""
+        return slice(None) if self.weather is None else np.flatnonzero(self.weather == SURFACE)
+
     def sidecar(self) -> np.ndarray:
-        """The per-point fields KITTI's .bin lacks, as a structured array (SIDECAR_DTYPE, format version 1)."""
-        rec = np.zeros(len(self), dtype=SIDECAR_DTYPE)
+        """The per-point fields KITTI's .bin lacks, as a structured array (SIDECAR_DTYPE, format version 1; with
+        the ``weather`` field when the scan has one, ``sidecar_dtype(weather=True)``)."""
+        rec = np.zeros(len(self), dtype=sidecar_dtype(self.weather is not None))
         rec["ring"] = self.ring
         rec["azimuth_index"] = self.azimuth_index
         rec["time_s"] = self.time_s
@@ -99,6 +121,8 @@ class Scan:
         rec["true_xyz"] = self.true_xyz
         rec["normal"] = self.normal
         rec["object_id"] = self.object_id
+        if self.weather is not None:
+            rec["weather"] = self.weather
         return rec
 
 
@@ -113,6 +137,9 @@ class CastBlock:
     dir_local: (B, 3) unit beam directions of the block's rays in the sensor frame.
     origin_bvh, direction_bvh: (B, 3) ray origins (m) and unit directions in the BVH's frame
         (the world shifted by ``-Raycaster.offset``), at each ray's firing pose.
+    kind, power, gain: with the receiver on, (M,) what each return is (``simlidar.weather.KINDS``), its
+        received power, and a surface's overlap x two-way transmission; ``hits`` then has a row per
+        return, face -1 and distance NaN where the beam reached no surface.
     """
 
     first_ray: int
@@ -122,6 +149,9 @@ class CastBlock:
     dir_local: np.ndarray
     origin_bvh: np.ndarray
     direction_bvh: np.ndarray
+    kind: np.ndarray | None = None
+    power: np.ndarray | None = None
+    gain: np.ndarray | None = None
 
 
 def _rows_times(x: np.ndarray, M: np.ndarray, out: np.ndarray) -> None:
@@ -177,6 +207,7 @@ class SweepSimulator:
         )
         bias_rng = np.random.default_rng([self.seed, 0xB1A5])
         self.ring_bias_m = bias_rng.normal(0.0, 1.0, rings) * sensor.ring_bias_std_m
+        self._weather = WeatherModel(sensor) if sensor.receiver.enabled else None
 
     @staticmethod
     def _directions(elevation: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
@@ -233,6 +264,7 @@ class SweepSimulator:
             azimuth_index=np.empty(n, np.int64), time_s=np.empty(n), range_m=np.empty(n),
             true_range_m=np.empty(n), true_xyz=np.empty((n, 3)), normal=np.empty((n, 3)),
             object_id=np.empty(n, np.int32), motion=motion,
+            weather=np.empty(n, np.uint8) if s.weather.on else None,
         )
         jobs = list(zip(cast, offsets[:-1], strict=True))
         self.raycaster.map(lambda job: self._fill_block(job[0], out, job[1], T_ref), jobs)
@@ -266,6 +298,8 @@ class SweepSimulator:
             d_bvh = np.einsum("nij,nj->ni", T_fire[ti, :3, :3], dir_local)
             o_bvh = T_fire[ti, :3, 3] - rc.offset
         hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0)
+        if self._weather is not None:
+            return self._cast_weather(k, a, b, hits, rng, frame_index, dir_local, o_bvh, d_bvh)
 
         ring = self.ray_ring[a + hits.ray]
         sigma = s.range_noise_std_m
@@ -281,6 +315,39 @@ class SweepSimulator:
         if not keep.all():
             hits, ring, measured = hits.select(keep), ring[keep], measured[keep]
         return CastBlock(a, hits, ring, measured, dir_local, o_bvh, d_bvh)
+
+    def _cast_weather(self, k, a, b, hits: CompactHits, rng, frame_index, dir_local, o_bvh, d_bvh) -> CastBlock:
+        """``_cast_block``'s end with the receiver on: each beam's echo through ``WeatherModel.select``, then
+        the range noise (the surface's incidence-grown sigma on a surface's echo, sigma itself on a weather
+        echo), the range window and the dropouts."""
+        s = self.sensor
+        echo = hits.distance if s.beam_divergence_deg == 0 else self._echo_range(hits, o_bvh, d_bvh)
+        cosk = np.abs(hits.cos_incidence)
+        if s.intensity_incidence_exponent != 1:
+            cosk = cosk**s.intensity_incidence_exponent
+        refl = np.take(self._reflectance, np.take(self.world.face_object_id, hits.face))
+        power = refl * cosk / np.maximum(hits.distance, 1e-6) ** 2
+        weather_rng = np.random.default_rng([self.seed, 2, int(frame_index), k])
+        got = self._weather.select(weather_rng, b - a, hits.ray, hits.distance, echo, power)
+        surface = got.hit >= 0
+        face, distance, cos_incidence = np.full(len(got.ray), -1), np.full(len(got.ray), np.nan), \
+            np.full(len(got.ray), np.nan)
+        hit = got.hit[surface]
+        face[surface], distance[surface], cos_incidence[surface] = hits.face[hit], hits.distance[hit], \
+            hits.cos_incidence[hit]
+        rows = CompactHits(got.ray, face, distance, cos_incidence, hits.face_normals)
+        ring = self.ray_ring[a + got.ray]
+        sigma = np.full(len(ring), s.range_noise_std_m)
+        on_surface = got.kind == SURFACE
+        if s.incidence_noise_max_factor > 1:
+            cos = np.abs(rows.cos_incidence[on_surface])
+            sigma[on_surface] *= np.minimum(1.0 / np.maximum(cos, 1e-12), s.incidence_noise_max_factor)
+        measured = got.range_m + self.ring_bias_m[ring] + rng.standard_normal(len(ring)) * sigma
+        keep = (measured >= s.min_range_m) & (measured <= s.max_range_m)
+        if s.dropout_probability > 0:
+            keep &= rng.random(len(ring)) >= s.dropout_probability
+        return CastBlock(a, rows.select(keep), ring[keep], measured[keep], dir_local, o_bvh, d_bvh,
+                         got.kind[keep], got.power[keep], got.gain[keep])
 
     def _echo_range(self, hits: CompactHits, o_bvh: np.ndarray, d_bvh: np.ndarray) -> np.ndarray:
         """(m,) range a divergent beam reports for each axis hit: an echo of its sub-rays (see the module doc).
@@ -366,9 +433,28 @@ class SweepSimulator:
         if s.intensity_incidence_exponent != 1:
             cosk **= s.intensity_incidence_exponent
         out.intensity[sl] = np.take(self._reflectance, obj) * cosk * falloff
+        if c.kind is not None:
+            self._fill_weather(c, out, sl, obj)
         out.ring[sl] = c.ring
         np.take(self.ray_column, g, out=out.azimuth_index[sl])
         np.take(self.ray_time_s, g, out=out.time_s[sl])
         out.range_m[sl] = measured
         out.true_range_m[sl] = hits.distance
         out.object_id[sl] = obj
+        if c.kind is not None:
+            out.object_id[sl][hits.face < 0] = -1
+
+    def _fill_weather(self, c: CastBlock, out: Scan, sl: slice, obj: np.ndarray) -> None:
+        """The receiver's part of a block's rows: intensities (a surface's times its gain, a weather echo's from
+        its power), the weather flags, and the truth of beams that reached no surface (NaN)."""
+        s = self.sensor
+        weather = c.kind != SURFACE
+        intensity = out.intensity[sl]
+        intensity *= np.where(weather, 1.0, c.gain)
+        if weather.any():
+            r = np.maximum(c.measured[weather], 1e-6)
+            intensity[weather] = np.minimum(1.0, c.power[weather] * np.minimum(r, s.intensity_range_ref_m) ** 2)
+            bare = c.hits.face < 0
+            out.normal[sl][bare] = np.nan
+        if out.weather is not None:
+            out.weather[sl] = c.kind

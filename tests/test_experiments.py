@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from simlidar import se3
-from tools.experiments.records import RUN_FILE, RunRecord, markdown_table, to_jsonable
-from tools.experiments.suite import SequenceSpec, ensure_sequence, parse_spec
+from tools.records import RUN_FILE, RunRecord, markdown_table, to_jsonable
+from tools.sequence_cache import SequenceSpec, ensure_sequence, parse_spec
 
 # A short city stretch at cruise speed with the paper's sensor: shared by the small runs.
 CITY = SequenceSpec("city", 1, frames=20, start_s=5.0)
@@ -67,7 +67,7 @@ def test_parse_spec_and_cache_key(cache):
 def test_the_cache_keeps_to_its_cap_evicting_the_least_recently_used(tmp_path, caplog):
     import os
 
-    from tools.experiments.suite import trim_cache
+    from tools.sequence_cache import trim_cache
 
     for k, name in enumerate(["a", "b", "c", "d"]):  # 1 MB each, used in this order (a the longest ago)
         folder = tmp_path / name
@@ -86,7 +86,7 @@ def test_the_cache_keeps_to_its_cap_evicting_the_least_recently_used(tmp_path, c
 
 
 def test_experiments_simulate_into_memory_without_a_cache(tmp_path):
-    from tools.experiments.suite import load_sequence
+    from tools.sequence_cache import load_sequence
 
     spec = SequenceSpec("tunnel", 1, frames=2, start_s=10.0, sensor="vlp16")
     mem = load_sequence(spec, None, fields="truth")
@@ -269,8 +269,8 @@ def test_table_run_reads_back(table_run, tmp_path):
     back = load_table_result(copy)
     assert [s.spec for s in back.sequences] == [s.spec for s in result.sequences]
     for m in ("bl", "salo"):
-        got, want = back.sequences[0].methods[m], result.sequences[0].methods[m]
-        assert np.allclose(got.segment_errors_m, want.segment_errors_m)
+        got, want = back.sequences[0].segment_errors[m], result.sequences[0].segment_errors[m]
+        assert np.allclose(got, want)
     before = json.loads((copy / "results.json").read_text())
     rewrite_table(copy)
     assert json.loads((copy / "results.json").read_text())["table"] == before["table"]
@@ -297,10 +297,10 @@ def test_salo_not_worse_than_bl_beyond_noise(table_run):
     (``salo experiment table``) has the per-sequence figures.
     """
     _, result = table_run
-    bl = np.concatenate([s.methods["bl"].segment_errors_m for s in result.sequences])
-    salo = np.concatenate([s.methods["salo"].segment_errors_m for s in result.sequences])
+    bl = np.concatenate([s.segment_errors["bl"] for s in result.sequences])
+    salo = np.concatenate([s.segment_errors["salo"] for s in result.sequences])
     d = salo - bl
-    path = sum(s.methods["bl"].metrics["path_length_m"] for s in result.sequences)
+    path = sum(s.metrics["bl"]["path_length_m"] for s in result.sequences)
     independent = max(1.0, path / result.params.segment_length_m)
     noise = 2.0 * np.std(d) / math.sqrt(independent)
     assert np.mean(salo) <= np.mean(bl) + noise + 1e-9, (np.mean(salo), np.mean(bl), noise)
@@ -451,8 +451,8 @@ def test_cli_commands_parse():
 
     parser = argparse.ArgumentParser(prog="salo")
     cli_experiment.add_commands(parser.add_subparsers(dest="command", required=True))
-    a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match.target=raw"])
-    assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match.target=raw"]
+    a = parser.parse_args(["experiment", "table", "--quick", "--sequences", "city:2:40", "--set", "match.target=map"])
+    assert a.func is cli_experiment.cmd_table and a.quick and a.config_set == ["match.target=map"]
     from tools.experiments.table import DEFAULT_METHODS
 
     assert a.methods == ",".join(DEFAULT_METHODS)  # the CLI's spelled-out default is the table's
@@ -480,6 +480,6 @@ def test_an_experiment_stopped_by_bad_input_leaves_no_run_folder(tmp_path, capsy
 
 
 def test_panel_labels_go_on_past_z():
-    from tools.experiments.plots import panel_label
+    from tools.plotting import panel_label
 
     assert [panel_label(i) for i in (0, 1, 25, 26, 27, 51, 52)] == ["a", "b", "z", "aa", "ab", "az", "ba"]

@@ -10,17 +10,8 @@ from simlidar.dataset import open_sequence
 from simlidar.in_memory import simulate_in_memory
 from simlidar.sensor import load_preset
 from simlidar.simulate import simulate_sequence
-from tools.experiments.generalize import (
-    EVALUATION_SEEDS,
-    KINDS,
-    SENSORS,
-    TUNING_SEEDS,
-    GeneralizeParams,
-    run_generalize,
-    suite,
-    summarize,
-    trajectory_figures,
-)
+from tools.experiments.generalize import GeneralizeParams, run_generalize, summarize
+from tools.family_suite import EVALUATION_SEEDS, KINDS, SENSORS, TUNING_SEEDS, suite, trajectory_figures
 
 
 def test_in_memory_frames_are_the_written_ones(tmp_path):

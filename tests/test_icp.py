@@ -9,12 +9,11 @@ from helpers import box_room, constant_velocity
 from odometry.config import BL, NCF, SALO, SALO_MAP, ConfigError, config_from_dict, load_config, variant
 from odometry.deskew import deskew, redeskew, screw_apply
 from odometry.estimation import point_to_plane_step
-from odometry.filters import filter_scan
-from odometry.icp import Source, Target, converged, match, register
+from odometry.icp import NearestCache, Source, Target, converged, match, register
 from odometry.kdtree import KDTree
 from odometry.pipeline import Odometry, OdometryError
 from odometry.rejectors import Matches, distance_rejector, trimmed_rejector
-from odometry.voxels import first_per_voxel, voxel_centroids
+from odometry.voxels import voxel_centroids
 from simlidar import se3
 from simlidar.sensor import load_preset
 from simlidar.sweep import SweepSimulator
@@ -58,29 +57,32 @@ def test_point_to_plane_step_leaves_unconstrained_direction_alone():
 
 
 def test_reused_nearest_neighbours_are_the_searched_ones():
-    """match() proves most neighbours from its last search; the answer equals a fresh search's."""
+    """match() with a cache proves most neighbours from its last search; the answer equals a fresh search's."""
     rng = np.random.default_rng(4)
     cloud = rng.uniform(-20, 20, (20000, 3))
     tree = KDTree(cloud)
     target = Target(cloud, tree, np.zeros_like(cloud))
+    cache = NearestCache()
     points = cloud[rng.choice(len(cloud), 3000)] + rng.normal(0, 0.3, (3000, 3))
     reused = 0
     for step in (0.0, 0.002, 0.002, 0.05, 0.002, 1.0, 0.0):  # ICP-sized steps, a jump, none
         points = points + rng.normal(0, step, points.shape)
-        before = None if target.nearest is None else target.nearest.points.copy()
-        got = match(points, target, 1.0)
+        before = None if cache.points is None else cache.points.copy()
+        got = match(points, target, 1.0, cache)
         dist, idx = tree.query(points, k=1, distance_upper_bound=1.0)
         found = np.flatnonzero(np.isfinite(dist))
         assert np.array_equal(got.source_index, found)
         assert np.array_equal(got.target_index, idx[found])
         assert np.array_equal(got.distance_m, dist[found])  # the same values, not merely close
         if before is not None:
-            reused += int(np.all(target.nearest.points == before, axis=1).sum())
+            reused += int(np.all(cache.points == before, axis=1).sum())
     assert reused > 3000  # the millimetre steps kept most neighbours without a search
-    match(points[:10], target, 1.0)  # other query points or another bound: a new search
-    assert len(target.nearest.points) == 10
-    match(points[:10], target, 2.0)
-    assert target.nearest.bound_m == 2.0
+    match(points[:10], target, 1.0, cache)  # other query points or another bound: a new search
+    assert len(cache.points) == 10
+    match(points[:10], target, 2.0, cache)
+    assert cache.bound_m == 2.0
+    uncached = match(points, target, 1.0)  # without a cache: a plain search
+    assert np.array_equal(uncached.source_index, found)
 
 
 def test_rejectors():
@@ -130,34 +132,6 @@ def test_voxel_centroids():
     order = np.argsort(c[:, 0])
     assert np.allclose(c[order], [[-0.1, 0, 0], [0.2, 0.2, 0.2], [1.2, 0.1, 0.1]])
     assert np.allclose(t[order], [7.0, 2.0, 5.0])
-
-
-def test_first_per_voxel():
-    pts = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.2, 0.1, 0.1], [-0.1, 0.0, 0.0], [1.9, 0.9, 0.5]])
-    assert first_per_voxel(pts, 1.0).tolist() == [0, 2, 3]
-    assert first_per_voxel(pts, 0.25).tolist() == [0, 1, 2, 3, 4]
-    assert first_per_voxel(np.zeros((0, 3)), 1.0).tolist() == []
-
-
-def test_source_thinning_keeps_the_map_points():
-    """filter.source_voxel_size_m thins the ICP source to one point per coarse voxel; the map's centroids stay."""
-    from odometry.config import ConfigError, variant
-
-    rng = np.random.default_rng(3)
-    ground = np.c_[rng.uniform(-20, 20, (20000, 2)), rng.normal(-1.8, 0.01, 20000)]
-    fine = variant("salo-map")
-    coarse = fine.replace(filter={"source_voxel_size_m": 1.0})
-    a, b = filter_scan(ground, fine), filter_scan(ground, coarse)
-    assert np.array_equal(a.centroids, b.centroids) and np.array_equal(a.points, a.centroids)
-    # every source point is one of the centroids, one per occupied 1 m voxel (40 x 40 of them)
-    assert len(b.points) == len(np.unique(np.floor(a.centroids / 1.0), axis=0)) == 1600
-    assert np.isin(b.points.view("f8,f8,f8"), a.centroids.view("f8,f8,f8")).all()
-    assert b.counts["source"] == len(b.points)
-    assert np.array_equal(b.centroids[b.centroid_rows], b.points) and a.centroid_rows is None
-    scan_to_scan = variant("bl").replace(filter={"source_voxel_size_m": 1.0})  # (ignored there)
-    assert len(filter_scan(ground, scan_to_scan).points) == len(filter_scan(ground, variant("bl")).points)
-    with pytest.raises(ConfigError, match="at least filter.voxel_size_m"):
-        fine.replace(filter={"source_voxel_size_m": 0.1})
 
 
 def test_deskew_matches_simulator_truth():
@@ -275,10 +249,10 @@ def test_implausible_estimate_is_flagged_and_extrapolated():
     assert not loose.last.implausible and np.abs(loose.poses[2] - pose).max() < 5e-3
 
 
-@pytest.mark.parametrize("target", ["filtered", "raw", "map"])
+@pytest.mark.parametrize("target", ["filtered", "map"])
 def test_every_match_target_tracks_a_known_motion(target):
-    """A corner of three planes, seen from a sensor that moves and turns: the previous filtered scan,
-    the previous raw scan (normals estimated where matched) and the local map all recover the path."""
+    """A corner of three planes, seen from a sensor that moves and turns: the previous filtered scan and
+    the local map both recover the path."""
     rng = np.random.default_rng(5)
     q, _ = planes_cloud(rng, 4000)
     q += rng.normal(0.0, 0.002, q.shape)

@@ -13,7 +13,12 @@ the project module it loads (``from pkg import name`` is the module
     plotting code, and never ``scenes`` or ``tools``; ``scenes`` and ``simlidar``
     import neither each other nor ``tools``; nothing imports ``tools`` but ``tools``;
     ``paramspec`` (which every package may import) imports no project module and
-    nothing outside the standard library.
+    nothing outside the standard library;
+(d) the experiments are the top of ``tools``: only they and the command line
+    import ``tools.experiments`` (they import the methods, the peers and what
+    ``tools`` shares, never the reverse);
+(e) no module imports another's private name (``from X import _name``): what
+    several modules use is a public name of a module named for its idea.
 
 The checks are functions of a graph, so the synthetic graphs at the end show
 that each of them can fail.
@@ -28,6 +33,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("paramspec", "simlidar", "scenes", "odometry", "tools")
 CLI = "tools.cli"
+EXPERIMENTS = "tools.experiments"
 EMBREE = "embreex"
 PLOTTING = ("matplotlib", "pyvista", "vtk", "vtkmodules")
 
@@ -83,6 +89,23 @@ def imports_of(name: str, path: Path, modules: set[str]) -> tuple[set[str], set[
                 sub = f"{module}.{alias.name}"
                 add(sub if sub in modules else module)
     return project, external
+
+
+def private_imports(name: str, path: Path, modules: set[str]) -> list[str]:
+    """``from X import _name`` in module ``name`` (anywhere in it) where X is another project module:
+    "name imports _name from X" for each (a module's own names, and dunders, are not counted)."""
+    tree = ast.parse(path.read_text(), str(path))
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            base = package[: len(package) - node.level + 1] if node.level else []
+            source = resolve(".".join(base + ([node.module] if node.module else [])), modules)
+            for alias in node.names:
+                private = alias.name.startswith("_") and not alias.name.startswith("__")
+                if private and source is not None and source != name:
+                    found.append(f"{name} imports {alias.name} from {source}")
+    return found
 
 
 def build_graph(files: dict[str, Path]) -> tuple[dict[str, set[str]], dict[str, set[str]]]:
@@ -179,8 +202,18 @@ def package_violations(graph: dict[str, set[str]], external: dict[str, set[str]]
     return out
 
 
+def experiment_violations(graph: dict[str, set[str]]) -> list[str]:
+    """(d) imports of ``tools.experiments`` from outside it and the command line."""
+    def inside(module: str) -> bool:
+        return module == EXPERIMENTS or module.startswith(EXPERIMENTS + ".")
+
+    return [f"{src} imports the experiment module {dst}" for src, dsts in sorted(graph.items())
+            for dst in sorted(dsts) if inside(dst) and not inside(src) and not is_cli(src)]
+
+
 # ---------------------------------------------------------------- the project
-GRAPH, EXTERNAL = build_graph(module_files())
+FILES = module_files()
+GRAPH, EXTERNAL = build_graph(FILES)
 
 
 def test_the_graph_covers_the_project():
@@ -206,6 +239,14 @@ def test_package_rules_of_the_architecture():
     assert package_violations(GRAPH, EXTERNAL) == []
 
 
+def test_only_the_experiments_and_the_command_line_import_the_experiments():
+    assert experiment_violations(GRAPH) == []
+
+
+def test_no_module_imports_another_modules_private_names():
+    assert [v for name, path in FILES.items() for v in private_imports(name, path, set(FILES))] == []
+
+
 def test_odometry_imports_simlidar_without_embree():
     used = {dst for src, dsts in GRAPH.items() if src.startswith("odometry") for dst in dsts
             if dst.startswith("simlidar")}
@@ -222,6 +263,8 @@ def test_the_checks_catch_synthetic_violations():
         "odometry.p": {"simlidar.e"}, "simlidar.e": {"simlidar.raycast"}, "simlidar.raycast": set(),
         "odometry.q": {"odometry.plots"}, "odometry.plots": set(),
         "paramspec.x": {"scenes.y"},
+        "tools.methods": {"tools.experiments.peer"}, "tools.experiments.peer": set(),  # the reverse layering
+        "tools.experiments.table": {"tools.methods"}, "tools.cli.experiment": {"tools.experiments.table"},
     }
     external = {"simlidar.raycast": {EMBREE}, "odometry.plots": {"matplotlib"}, "paramspec.x": {"numpy", "math"}}
     assert cli_violations(graph) == ["tools.sweep.tasks imports the command-line module tools.cli.common"]
@@ -234,15 +277,35 @@ def test_the_checks_catch_synthetic_violations():
     assert any("odometry.q loads plotting code (through odometry.plots)" in f for f in found)
     assert any("paramspec.x imports scenes.y: paramspec may not import scenes" in f for f in found)
     assert any("paramspec.x imports numpy: paramspec uses the standard library only" in f for f in found)
+    assert experiment_violations(graph) == ["tools.methods imports the experiment module tools.experiments.peer"]
+
+
+def write_package(root: Path, sources: dict[str, str]) -> None:
+    """A synthetic package under ``root``: relative path -> source."""
+    for relative, text in sources.items():
+        (root / relative).parent.mkdir(parents=True, exist_ok=True)
+        (root / relative).write_text(text)
+
+
+def test_the_private_import_check_catches_one(tmp_path):
+    write_package(tmp_path, {
+        "tools/__init__.py": "", "tools/sub/__init__.py": "",
+        "tools/sub/plots.py": "def _figure():\n    pass\n\ndef save():\n    _figure()\n",
+        "tools/sub/page.py": "from .plots import save\n\ndef draw():\n    from .plots import _figure\n",
+        "tools/other.py": "from tools.sub.plots import _figure, save\nfrom .sub import plots as __x\n",
+    })
+    files = module_files(tmp_path, ("tools",))
+    found = [v for name, path in files.items() for v in private_imports(name, path, set(files))]
+    assert found == ["tools.other imports _figure from tools.sub.plots",
+                     "tools.sub.page imports _figure from tools.sub.plots"]
 
 
 def test_relative_and_in_function_imports_are_resolved(tmp_path):
-    pkg = tmp_path / "simlidar"
-    (pkg / "sub").mkdir(parents=True)
-    (pkg / "__init__.py").write_text("")
-    (pkg / "sub" / "__init__.py").write_text("from . import leaf\n")
-    (pkg / "sub" / "leaf.py").write_text("def f():\n    from ..top import x\n    return x\n")
-    (pkg / "top.py").write_text("from .sub.leaf import f\n")
+    write_package(tmp_path, {
+        "simlidar/__init__.py": "", "simlidar/sub/__init__.py": "from . import leaf\n",
+        "simlidar/sub/leaf.py": "def f():\n    from ..top import x\n    return x\n",
+        "simlidar/top.py": "from .sub.leaf import f\n",
+    })
     graph, _ = build_graph(module_files(tmp_path, ("simlidar",)))
     assert graph["simlidar.sub"] == {"simlidar.sub.leaf"}
     assert graph["simlidar.sub.leaf"] == {"simlidar.top"}

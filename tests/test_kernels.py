@@ -1,4 +1,4 @@
-"""The compiled kernels (odometry/kernels.py) compute what their docstrings' numpy expressions compute."""
+"""The compiled kernels (odometry/kernels/) compute what their docstrings' numpy expressions compute."""
 
 from __future__ import annotations
 
@@ -6,9 +6,24 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from odometry import kernels
 from odometry.constraints import constraint_rows
+from odometry.kernels.gcr import row_max_with_floor
+from odometry.kernels.ncf import beam_noise_moments, range_noise_moments, tangent_covariance_in_frame
+from odometry.kernels.nearest import reusable_matches
+from odometry.kernels.normals import eigh3_closed_form, gathered_scatter, map_normal_verdicts, neighbourhood_scatter
+from odometry.kernels.plane_system import (
+    constraint_information,
+    more_plane_rows,
+    plane_gate,
+    plane_normal_equations,
+    standard_rejection_system,
+)
+from odometry.kernels.poles import consensus_votes
+from odometry.kernels.range_image import fill_range_image
+from odometry.kernels.screw import rescrew_motion, screw_motion
+from odometry.kernels.voxel_hash import group_keys, keys_near, packed_voxel_keys, voxel_sums, within_reach_of_any
 from simlidar import se3
+from simlidar.degeneracy import plane_jacobian
 
 
 def unit_rows(rng, n):
@@ -21,13 +36,14 @@ def test_plane_normal_equations_are_J_transpose_J_and_J_transpose_r():
     p = rng.uniform(-40, 40, size=(3000, 3))
     q = p + rng.normal(scale=0.05, size=p.shape)
     n = unit_rows(rng, 3000)
-    H, g, sum_r2 = kernels.plane_normal_equations(p, q, n)
+    H, g, sum_r2 = plane_normal_equations(p, q, n)
     r = np.einsum("ij,ij->i", n, p - q)
-    J = np.hstack([n, np.cross(p, n)])
+    J = plane_jacobian(p, n).T  # (the numpy reference of the compiled row)
+    np.testing.assert_array_equal(J, np.hstack([n, np.cross(p, n)]))
     np.testing.assert_allclose(H, J.T @ J, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(g, J.T @ r, rtol=1e-12, atol=1e-12)
     assert sum_r2 == pytest.approx(float(r @ r), rel=1e-12)
-    H0, g0, s0 = kernels.plane_normal_equations(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+    H0, g0, s0 = plane_normal_equations(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
     assert not H0.any() and not g0.any() and s0 == 0.0
 
 
@@ -37,7 +53,7 @@ def test_constraint_information_sums_the_scaled_rows_of_the_chosen_points():
     n = unit_rows(rng, 500)
     rows = np.flatnonzero(rng.random(500) < 0.4)
     J = constraint_rows(p[rows], n[rows], 7.0)
-    np.testing.assert_allclose(kernels.constraint_information(p, n, rows, 7.0), J.T @ J, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(constraint_information(p, n, rows, 7.0), J.T @ J, rtol=1e-12, atol=1e-12)
 
 
 def test_eigh3_closed_form_decomposes_symmetric_matrices():
@@ -46,7 +62,7 @@ def test_eigh3_closed_form_decomposes_symmetric_matrices():
     R = se3.exp(np.concatenate([np.zeros(3), rng.normal(size=3)]))[:3, :3]
     D = (P - P.mean(axis=1, keepdims=True)) @ R.T
     A = np.einsum("mki,mkj->mij", D, D)
-    w, V, unsure = kernels.eigh3_closed_form(A, 1e-3)
+    w, V, unsure = eigh3_closed_form(A, 1e-3)
     assert not unsure.any()
     np.testing.assert_allclose(w, np.linalg.eigvalsh(A)[:, ::-1], rtol=1e-9, atol=1e-12 * np.abs(A).max())
     np.testing.assert_allclose(np.einsum("mij,mjk->mik", A, V), V * w[:, None, :], atol=1e-9 * np.abs(A).max())
@@ -54,12 +70,12 @@ def test_eigh3_closed_form_decomposes_symmetric_matrices():
     np.testing.assert_allclose(np.linalg.det(V), 1.0, atol=1e-12)
     # two equal eigenvalues (a rod) and a non-finite matrix are flagged for LAPACK
     rod = np.diag([5.0, 1.0, 1.0])[None]
-    assert kernels.eigh3_closed_form(np.concatenate([rod, np.full((1, 3, 3), np.nan)]), 1e-3)[2].all()
+    assert eigh3_closed_form(np.concatenate([rod, np.full((1, 3, 3), np.nan)]), 1e-3)[2].all()
 
 
 def test_neighbourhood_scatter_is_the_centred_scatter():
     P = np.random.default_rng(6).normal(size=(300, 12, 3)) * 5 + 40
-    mean, S = kernels.neighbourhood_scatter(P)
+    mean, S = neighbourhood_scatter(P)
     D = P - P.mean(axis=1, keepdims=True)
     np.testing.assert_allclose(mean, P.mean(axis=1), rtol=1e-14)
     np.testing.assert_allclose(S, np.einsum("mki,mkj->mij", D, D), rtol=1e-11, atol=1e-11)
@@ -72,12 +88,12 @@ def test_screw_motion_is_the_exponential_of_each_points_fraction_of_the_twist(om
     s = np.concatenate([[0.0, 1e-9], rng.uniform(0.0, 1.0, size=98)])
     p = rng.uniform(-50, 50, size=(100, 3))
     n = unit_rows(rng, 100)
-    moved, turned = kernels.screw_motion(xi, s, p, n)
+    moved, turned = screw_motion(xi, s, p, n)
     for i in range(100):
         T = se3.exp(s[i] * xi)
         np.testing.assert_allclose(moved[i], T[:3, :3] @ p[i] + T[:3, 3], atol=1e-12)
         np.testing.assert_allclose(turned[i], T[:3, :3] @ n[i], atol=1e-14)
-    moved_alone, none = kernels.screw_motion(xi, s, p, np.zeros((0, 3)))
+    moved_alone, none = screw_motion(xi, s, p, np.zeros((0, 3)))
     np.testing.assert_array_equal(moved_alone, moved)
     assert none.shape == (0, 3)
 
@@ -91,7 +107,7 @@ def test_reusable_matches_keep_only_nearest_neighbours_they_can_prove():
     d2, i2 = tree.query(searched, k=2, distance_upper_bound=bound)
     clear = np.minimum(d2[:, 1], bound)
     moved = searched + rng.normal(scale=0.02, size=searched.shape)
-    dist, redo = kernels.reusable_matches(moved, searched, i2[:, 0], clear, target, bound, 1e-9)
+    dist, redo = reusable_matches(moved, searched, i2[:, 0], clear, target, bound, 1e-9)
     held = np.setdiff1d(np.arange(2000), redo)
     assert len(held) > 1000 and len(redo) > 0
     d_now, i_now = tree.query(moved, k=1, distance_upper_bound=bound)
@@ -106,10 +122,10 @@ def test_more_plane_rows_continue_one_system():
     p = rng.uniform(-40, 40, size=(500, 3))
     q = p + rng.normal(scale=0.05, size=p.shape)
     n = unit_rows(rng, 500)
-    whole = kernels.plane_normal_equations(p, q, n)
-    first = kernels.plane_normal_equations(p[:300], q[:300], n[:300])
+    whole = plane_normal_equations(p, q, n)
+    first = plane_normal_equations(p[:300], q[:300], n[:300])
     H0 = first[0].copy()
-    for got, expected in zip(kernels.more_plane_rows(*first, p[300:], q[300:], n[300:]), whole, strict=True):
+    for got, expected in zip(more_plane_rows(*first, p[300:], q[300:], n[300:]), whole, strict=True):
         np.testing.assert_array_equal(got, expected)  # (the same sums in the same order)
     np.testing.assert_array_equal(first[0], H0)  # (the given system is left as it was)
 
@@ -123,13 +139,13 @@ def test_plane_gate_is_the_plane_and_ncf_masks_and_the_sure_information():
     normals[::9] = np.nan  # no plane there
     uncertain = rng.random(400) < 0.3
     centre = np.array([3.0, -2.0, 0.5])
-    plane, sure, H = kernels.plane_gate(moved, centre, source_index, target_index, normals, uncertain, 12.0)
+    plane, sure, H = plane_gate(moved, centre, source_index, target_index, normals, uncertain, 12.0)
     np.testing.assert_array_equal(plane, np.isfinite(normals[:, 0]))
     np.testing.assert_array_equal(sure, plane & ~uncertain[target_index])
     assert 0 < sure.sum() < plane.sum() < 700
-    expected = kernels.constraint_information(moved[source_index] - centre, normals, np.flatnonzero(sure), 12.0)
+    expected = constraint_information(moved[source_index] - centre, normals, np.flatnonzero(sure), 12.0)
     np.testing.assert_array_equal(H, expected)
-    plane, every, none = kernels.plane_gate(moved, centre, source_index, target_index, normals, np.zeros(0, bool),
+    plane, every, none = plane_gate(moved, centre, source_index, target_index, normals, np.zeros(0, bool),
                                             12.0)
     np.testing.assert_array_equal(every, plane)  # no verdicts: every plane is sure, and no information summed
     assert not none.any()
@@ -155,7 +171,7 @@ def test_standard_rejection_system_is_the_rejector_chain_and_its_system():
         if quantum:
             distance = np.round(distance / quantum) * quantum
         for gcr, trim in ((True, 0.2), (False, 0.2), (True, 0.0), (False, 0.0), (True, 1.0)):
-            counts, H, g, sum_r2 = kernels.standard_rejection_system(
+            counts, H, g, sum_r2 = standard_rejection_system(
                 moved, target_points, normals, source_index, target_index, distance, keep, 1.0,
                 bound if gcr else np.zeros(0), trim, centre)
             m = Matches(source_index, target_index, distance, normals).select(keep)
@@ -170,7 +186,7 @@ def test_standard_rejection_system_is_the_rejector_chain_and_its_system():
             rows = np.sort(np.argsort(m.distance_m, kind="stable")[:n_keep])
             assert counts.tolist() == [expected[0], expected[-1], n_keep]
             kept = m.select(np.isin(np.arange(len(m)), rows))
-            system = kernels.plane_normal_equations(moved[kept.source_index] - centre,
+            system = plane_normal_equations(moved[kept.source_index] - centre,
                                                     target_points[kept.target_index] - centre, kept.target_normals)
             for got, want in zip((H, g, sum_r2), system, strict=True):
                 np.testing.assert_array_equal(got, want)
@@ -187,28 +203,28 @@ def test_row_max_with_floor_is_nanmax_raised_to_the_floor():
         with np.errstate(invalid="ignore"), pytest.warns(RuntimeWarning):
             expected = np.nanmax(table, axis=1)
         expected = np.where(np.isnan(expected), expected, np.maximum(expected, floor))
-        np.testing.assert_array_equal(kernels.row_max_with_floor(table, floor), expected)
+        np.testing.assert_array_equal(row_max_with_floor(table, floor), expected)
 
 
 def test_voxel_keys_and_grouping_agree_with_numpy():
     rng = np.random.default_rng(5)
     p = rng.uniform(-60, 60, size=(20000, 3))
     p[::3] = p[1::3][: len(p[::3])] + rng.uniform(-0.1, 0.1, size=(len(p[::3]), 3))  # voxels of several points
-    keys, inside = kernels.packed_voxel_keys(p, 0.35, 21)
+    keys, inside = packed_voxel_keys(p, 0.35, 21)
     ijk = np.floor(p / 0.35).astype(np.int64) + (1 << 20)
     assert inside
     np.testing.assert_array_equal(keys, (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2])
-    distinct, slot = kernels.group_keys(keys)
+    distinct, slot = group_keys(keys)
     u, inverse = np.unique(keys, return_inverse=True)
     np.testing.assert_array_equal(distinct, u)
     np.testing.assert_array_equal(slot, inverse)
     # the hash table grows as distinct keys arrive (from 2048): across its sizes, and with none
     for n_distinct in (0, 1, 2048, 2049, 9000):
         some = rng.permutation(np.repeat(rng.choice(keys, n_distinct, replace=False), 3))
-        for got, expected in zip(kernels.group_keys(some), np.unique(some, return_inverse=True), strict=True):
+        for got, expected in zip(group_keys(some), np.unique(some, return_inverse=True), strict=True):
             np.testing.assert_array_equal(got, expected)
     values = rng.random(20000)
-    sums, value_sums, counts = kernels.voxel_sums(slot, len(u), p, values)
+    sums, value_sums, counts = voxel_sums(slot, len(u), p, values)
     np.testing.assert_array_equal(counts, np.bincount(inverse))
     for c in range(3):
         np.testing.assert_array_equal(sums[:, c], np.bincount(inverse, weights=p[:, c]))
@@ -216,7 +232,7 @@ def test_voxel_keys_and_grouping_agree_with_numpy():
     for bad in (np.nan, np.inf, 1e9):
         q = p.copy()
         q[7, 1] = bad
-        assert not kernels.packed_voxel_keys(q, 0.35, 21)[1]
+        assert not packed_voxel_keys(q, 0.35, 21)[1]
 
 
 def test_keys_near_and_within_reach_agree_with_numpy_and_a_kd_tree():
@@ -226,17 +242,17 @@ def test_keys_near_and_within_reach_agree_with_numpy_and_a_kd_tree():
     points = rng.uniform(-30, 30, size=(6000, 3))
     changed = np.vstack([rng.uniform(-30, 30, size=(300, 3)), points[:50] + rng.normal(scale=0.2, size=(50, 3))])
     keys, changed_keys, steps = voxel_keys(points, 1.0), voxel_keys(changed, 1.0), neighbour_key_steps()
-    near = kernels.keys_near(keys, changed_keys, steps)
+    near = keys_near(keys, changed_keys, steps)
     np.testing.assert_array_equal(near, np.isin(keys, np.unique(changed_keys[:, None] + steps)))
     assert 0 < near.sum() < len(keys)
-    assert not kernels.keys_near(keys, changed_keys[:0], steps).any()
+    assert not keys_near(keys, changed_keys[:0], steps).any()
     # within a voxel's edge: the nearest changed point by a k-d tree decides
     reach = rng.uniform(0.05, 1.0, size=len(points))
-    found = kernels.within_reach_of_any(points, keys, reach, changed, changed_keys, steps)
+    found = within_reach_of_any(points, keys, reach, changed, changed_keys, steps)
     d, _ = cKDTree(changed).query(points)
     np.testing.assert_array_equal(found, d <= reach)
     assert 0 < found.sum() < len(points)
-    assert not kernels.within_reach_of_any(points, keys, reach, changed[:0], changed_keys[:0], steps).any()
+    assert not within_reach_of_any(points, keys, reach, changed[:0], changed_keys[:0], steps).any()
 
 
 def pca_of(P):
@@ -251,7 +267,7 @@ def test_beam_noise_moments_are_the_sums_of_the_beam_terms():
     P = rng.normal(size=(200, 12, 3)) * np.array([1.0, 0.5, 0.02]) + rng.uniform(-30, 30, size=(200, 1, 3))
     beams = unit_rows(rng, 200 * 12).reshape(200, 12, 3)
     mean, V = pca_of(P)
-    zz, cc = kernels.beam_noise_moments(P, mean, V, beams)
+    zz, cc = beam_noise_moments(P, mean, V, beams)
     a = np.einsum("mki,mil->mkl", P - mean[:, None, :], V)
     c = np.einsum("mki,mil->mkl", beams, V)
     z = a[:, :, 2:3] * c[:, :, :2] + a[:, :, :2] * c[:, :, 2:3]
@@ -264,7 +280,7 @@ def test_range_noise_moments_are_the_sums_of_the_range_model_terms(angular_var):
     rng = np.random.default_rng(8)
     P = rng.normal(size=(200, 12, 3)) * np.array([1.0, 0.5, 0.02]) + rng.uniform(-30, 30, size=(200, 1, 3))
     mean, V = pca_of(P)
-    num, diag = kernels.range_noise_moments(P, mean, V, 4e-4, angular_var)
+    num, diag = range_noise_moments(P, mean, V, 4e-4, angular_var)
     PV = np.einsum("mki,mil->mkl", P, V)
     a = np.einsum("mki,mil->mkl", P - mean[:, None, :], V)
     r2 = np.einsum("mki,mki->mk", P, P)
@@ -283,7 +299,7 @@ def test_tangent_covariance_in_frame_rotates_and_decomposes():
     _, V = pca_of(rng.normal(size=(100, 12, 3)))
     L = rng.normal(size=(100, 2, 2))
     C = L @ L.transpose(0, 2, 1)
-    cov, eig, Q = kernels.tangent_covariance_in_frame(V, C)
+    cov, eig, Q = tangent_covariance_in_frame(V, C)
     Vt = V[:, :, :2]
     np.testing.assert_allclose(cov, Vt @ C @ Vt.transpose(0, 2, 1), atol=1e-12)
     w, U = np.linalg.eigh(cov)  # ascending: 0 along the normal, then minor, major
@@ -321,7 +337,7 @@ def test_fill_range_image_is_numpys_assignment_of_rows_to_cells():
     rings = rng.integers(0, 16, size=20000)
     expect = np.full((16, 900), -1, dtype=np.int64)
     expect[rings, azimuth_columns(points, 900)] = np.arange(20000)  # (repeated cells: the last row)
-    np.testing.assert_array_equal(kernels.fill_range_image(rings, points, 16, 900), expect)
+    np.testing.assert_array_equal(fill_range_image(rings, points, 16, 900), expect)
 
 
 def test_consensus_votes_count_the_groups_with_an_offset_within_the_radius():
@@ -337,7 +353,7 @@ def test_consensus_votes_count_the_groups_with_an_offset_within_the_radius():
     starts = np.searchsorted(owner, np.arange(41))
     groups = list(zip(starts[:-1], starts[1:], strict=True))
     expected = [sum(bool(np.any(np.hypot(*(offsets[s:e] - o).T) <= 0.25)) for s, e in groups) for o in offsets]
-    np.testing.assert_array_equal(kernels.consensus_votes(offsets, starts, 0.25), expected)
+    np.testing.assert_array_equal(consensus_votes(offsets, starts, 0.25), expected)
 
 
 def test_gathered_scatter_and_map_normal_verdicts_are_the_map_normals_numpy_expressions():
@@ -368,15 +384,15 @@ def test_gathered_scatter_and_map_normal_verdicts_are_the_map_normals_numpy_expr
     _, nb = cKDTree(points).query(at, k=k)
     noise, max_curvature, c_tau = 0.01, 0.05, np.radians(1.5) ** 2
 
-    mean, scatter, reach = kernels.gathered_scatter(points, nb, at)
+    mean, scatter, reach = gathered_scatter(points, nb, at)
     hood = points[nb]
-    mean_np, scatter_np = kernels.neighbourhood_scatter(hood)
+    mean_np, scatter_np = neighbourhood_scatter(hood)
     np.testing.assert_array_equal(mean, mean_np)
     np.testing.assert_array_equal(scatter, scatter_np)
     np.testing.assert_array_equal(reach, np.linalg.norm(hood[:, -1] - at, axis=1))
 
     lam, V = symmetric_eigh_descending(scatter)
-    normals, variance = kernels.map_normal_verdicts(
+    normals, variance = map_normal_verdicts(
         points, beams, elevations, from_, nb, at, mean, lam, V, (local_map.MIN_PLANE_EXTENT_SIGMAS * noise) ** 2,
         max_curvature, local_map.MIN_ELEVATION_SPREAD_RAD, local_map.MIN_BASELINE_M, noise**2, DEGENERATE_GAP,
         DEFAULT_GAP_SIGNIFICANCE_Z * np.sqrt(2.0 / (k - 1)))
@@ -400,24 +416,24 @@ def test_rescrew_motion_is_undoing_one_screw_then_doing_another():
     s = rng.uniform(0, 1, 400)
     xi_old = np.array([0.9, 0.05, 0.01, 0.002, -0.001, 0.03])
     xi_new = np.array([1.1, -0.02, 0.0, 0.0, 0.001, 0.025])
-    p1, n1 = kernels.screw_motion(-xi_old, s, p, n)
-    p2, n2 = kernels.screw_motion(xi_new, s, p1, n1)
+    p1, n1 = screw_motion(-xi_old, s, p, n)
+    p2, n2 = screw_motion(xi_new, s, p1, n1)
     none = np.zeros((0, 4))
     old_scalars, new_scalars = np.empty((400, 4)), np.empty((400, 4))
-    kernels.rescrew_motion(np.zeros(6), xi_old, s, p, n, none, old_scalars)  # (the scalars of xi_old)
-    p3, n3 = kernels.rescrew_motion(xi_old, xi_new, s, p, n, none, none)
+    rescrew_motion(np.zeros(6), xi_old, s, p, n, none, old_scalars)  # (the scalars of xi_old)
+    p3, n3 = rescrew_motion(xi_old, xi_new, s, p, n, none, none)
     np.testing.assert_array_equal(p3, p2)
     np.testing.assert_array_equal(n3, n2)
     # given the scalars of the old twist (the undo's), the same; the new twist's are handed back
-    p4, n4 = kernels.rescrew_motion(xi_old, xi_new, s, p, n, old_scalars, new_scalars)
+    p4, n4 = rescrew_motion(xi_old, xi_new, s, p, n, old_scalars, new_scalars)
     np.testing.assert_array_equal(p4, p2)
     np.testing.assert_array_equal(n4, n2)
     phi = s * np.linalg.norm(xi_new[3:])
     np.testing.assert_allclose(new_scalars, np.stack([np.cos(phi), np.sin(phi), s * (1 - np.cos(phi)) / phi,
                                                       s * (phi - np.sin(phi)) / phi], axis=1), rtol=1e-9)
     # a zero old twist undoes nothing; a pure translation moves by s rho
-    np.testing.assert_array_equal(kernels.rescrew_motion(np.zeros(6), xi_new, s, p, n, none, none)[0],
-                                  kernels.screw_motion(xi_new, s, p, n)[0])
+    np.testing.assert_array_equal(rescrew_motion(np.zeros(6), xi_new, s, p, n, none, none)[0],
+                                  screw_motion(xi_new, s, p, n)[0])
     shift = np.array([1.0, 2.0, 3.0, 0, 0, 0])
-    np.testing.assert_allclose(kernels.rescrew_motion(np.zeros(6), shift, s, p, p[:0], none, none)[0],
+    np.testing.assert_allclose(rescrew_motion(np.zeros(6), shift, s, p, p[:0], none, none)[0],
                                p + s[:, None] * shift[:3])

@@ -23,7 +23,7 @@ from tools.methods import (
     MethodError,
     OursMethod,
     method_from_name,
-    run_method_staged,
+    run_method,
 )
 from tools.staging import StagingError, parse_fields, stage_input, staged
 
@@ -70,7 +70,7 @@ def test_a_command_that_copies_the_ground_truth_finds_none(sequence_dir, tmp_pat
                      "cp $(dirname {scans})/poses.txt {out}", "cp {scans}/../../poses.txt {out}",
                      "cp $(dirname {out})/../poses.txt {out} # {scans}"):
         with pytest.raises(MethodError, match="exited with status"):
-            run_method_staged(CommandMethod("cheat", template), seq, log_path=tmp_path / "cheat.log")
+            run_method(CommandMethod("cheat", template), seq, log_path=tmp_path / "cheat.log")
     assert "No such file" in (tmp_path / "cheat.log").read_text()
 
 
@@ -87,10 +87,10 @@ def test_truth_fields_are_refused_and_none_gives_xyz_only(sequence_dir, tmp_path
 
 def test_a_command_and_ours_in_process_give_the_same_poses_close_to_the_truth(sequence_dir, tmp_path):
     seq = open_sequence(sequence_dir)
-    ours = run_method_staged(method_from_name("bl"), seq)
+    ours = run_method(method_from_name("bl"), seq)
     command = f"{sys.executable} -m tools.cli odometry {{sequence}} --variant bl --out {{out}}"
-    theirs = run_method_staged(CommandMethod("mine", command), seq, workdir=Path(__file__).parents[1],
-                               log_path=tmp_path / "command.log")
+    theirs = run_method(CommandMethod("mine", command), seq, workdir=Path(__file__).parents[1],
+                        log_path=tmp_path / "command.log")
     np.testing.assert_allclose(theirs.poses, ours.poses, atol=1e-9)
     assert ours.diagnostics is not None and len(ours.degenerate) == 5
     assert _truth_error_m(sequence_dir, ours.poses) < 0.05  # 5 frames at 8 m/s, 3 cm noise
@@ -113,12 +113,12 @@ def test_a_sequence_in_memory_is_handed_over_as_the_sensor_view_with_the_same_po
     # In memory (the view), staged on disk, and from the simulated folder: the same poses.
     with monkeypatch.context() as patch:  # in memory, an in-process method is handed nothing on disk
         patch.setattr("tools.staging.stage_input", lambda *a, **k: pytest.fail("staged on disk"))
-        in_memory = run_method_staged(method_from_name("bl"), memory)
+        in_memory = run_method(method_from_name("bl"), memory)
     with staged(memory) as stage:
         on_disk = method_from_name("bl").run_staged(stage)
     np.testing.assert_allclose(in_memory.poses, on_disk.poses, atol=1e-9)  # times.txt is text
-    np.testing.assert_allclose(in_memory.poses, run_method_staged(method_from_name("bl"),
-                                                                  open_sequence(sequence_dir)).poses, atol=1e-9)
+    np.testing.assert_allclose(in_memory.poses, run_method(method_from_name("bl"),
+                                                           open_sequence(sequence_dir)).poses, atol=1e-9)
 
 
 def test_a_command_without_out_or_scans_is_refused_naming_the_placeholders():
@@ -159,11 +159,11 @@ def test_a_plugin_registered_by_entry_point_runs_on_the_staged_sequence(sequence
     monkeypatch.syspath_prepend(str(pkg))
     method = method_from_name("truth-free")
     assert isinstance(method, FunctionMethod) and method.version == "1.0"
-    out = run_method_staged(method, open_sequence(sequence_dir))
+    out = run_method(method, open_sequence(sequence_dir))
     assert out.poses.shape == (5, 4, 4) and out.poses[4, 0, 3] == pytest.approx(3.2)
     # 8 m/s at 10 Hz is 0.8 m per frame along the path, not along x alone: the truth tells them apart.
     assert _truth_error_m(sequence_dir, out.poses) > _truth_error_m(
-        sequence_dir, run_method_staged(method_from_name("bl"), open_sequence(sequence_dir)).poses)
+        sequence_dir, run_method(method_from_name("bl"), open_sequence(sequence_dir)).poses)
 
 
 @pytest.mark.slow
@@ -171,6 +171,6 @@ def test_a_peer_runs_through_the_same_interface(sequence_dir):
     method = method_from_name("kiss-icp")
     if method.unavailable():
         pytest.skip(method.unavailable())
-    out = run_method_staged(method, open_sequence(sequence_dir))
+    out = run_method(method, open_sequence(sequence_dir))
     assert out.poses.shape == (5, 4, 4) and out.note.startswith("kiss-icp")
     assert _truth_error_m(sequence_dir, out.poses) < 0.2

@@ -191,27 +191,34 @@ def test_no_vertical_drift_on_rolling_terrain(rolling_suburb):
     assert one_ring > 1.5 * scan_to_scan, (default, scan_to_scan, one_ring)
 
 
+def cold_start_registrations(seq, config) -> tuple[dict, object]:
+    """The cold start of a sequence's first two scans: its first registration against each cold-start target,
+    and the ``Registration`` the stage keeps."""
+    odo = Odometry(config, seq.sensor)
+    odo.register_frame(seq[0])
+    kept = odo.cold_start(odo.predict(odo.prepare(seq[1].points, None, seq[1].ring)))
+    return kept.cold_starts, kept
+
+
 def test_cold_start_on_open_ground_from_rest():
     """The first registration of a map variant, on open ground with the car at rest: a map of the first scan
     alone has a normal only where two scan lines meet, which leaves the direction of travel to a few
     objects (translation eigenvalues 0.003 / 0.009 per match), and against it the coarse pass (3 m, no
     trimming) slid 0.76 m while the car moved 5 mm, the ICP refining it stayed there, and the motion
     prior then carried that velocity on (89 % t_err over 200 frames, where scan-to-scan BL had 0.84 %).
-    Refining standing still as well and keeping it where the points facing the difference fit it better
-    (``match.cold_start_from_rest``, scans without per-point times; an option, README) keeps the first two
-    frames within centimetres of the truth. Against the first scan's own points and normals
-    (``map.cold_start_target: scan``, also an option) they stay there too, and so does the default, which
-    keeps the better constrained of the two registrations (``map.cold_start_target: better``): the scan's.
-    Poles (on in the default) start the first registration from the offset they agree on, which keeps even
-    the map target there; the targets are compared without them."""
+    Against the first scan's own points and normals the first registration stays within centimetres of
+    the truth, and the default, which keeps the better constrained of the two, keeps the first two frames
+    there. Poles (on in the default) start the first registration from the offset they agree on, which
+    keeps even the map target there; the targets are compared without them."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     spec = next(s for s in suite((107,), frames=3, families=("open",)) if s.kind == "real")
     seq = simulate(dataclasses.replace(spec, sensor="salo32"))
     gt = seq.poses
     assert spec.start_s == 0.0 and np.linalg.norm(gt[1, :3, 3] - gt[0, :3, 3]) < 0.01  # from rest
+    truth = se3.inverse(gt[0]) @ gt[1]
 
     def largest_error(config) -> float:
         run = run_sequence(seq, config)
@@ -220,28 +227,23 @@ def test_cold_start_on_open_ground_from_rest():
     default = variant(DEFAULT_VARIANT)
     # the cold-start targets alone: without poles, whose agreed offset starts the first registration
     no_poles = default.replace(poles={"enabled": False})
-    map_target = no_poles.replace(map={"cold_start_target": "map"})
-    errors = {"map target": largest_error(map_target),
-              "from rest": largest_error(map_target.replace(match={"cold_start_from_rest": True})),
-              "scan target": largest_error(no_poles.replace(map={"cold_start_target": "scan"})),
-              "better, no poles": largest_error(no_poles),
-              "default": largest_error(default),
-              "map target, poles": largest_error(default.replace(map={"cold_start_target": "map"}))}
-    # (measured: 6.1 and 3.7 cm; the map target's coarse estimate 1.65 m; with the poles' offset 3.3 cm)
-    assert max(errors[k] for k in ("from rest", "scan target", "better, no poles", "default")) < 0.1, errors
-    assert errors["map target"] > 0.5, errors
-    assert errors["map target, poles"] < 0.1, errors
+    alone, _ = cold_start_registrations(seq, no_poles)
+    errors = {kind: float(np.linalg.norm(r.T_target_source[:3, 3] - truth[:3, 3])) for kind, r in alone.items()}
+    errors |= {"better, no poles": largest_error(no_poles), "default": largest_error(default)}
+    # (measured: the map target's registration 0.8 m off; the scan's, the better one's and the default's cm)
+    assert max(errors[k] for k in ("scan", "better, no poles", "default")) < 0.1, errors
+    assert errors["map"] > 0.5, errors
 
 
 def test_the_better_constrained_first_registration_is_kept():
-    """``map.cold_start_target: better`` registers the first scan pair against both cold-start targets (the
-    map of the first scan, the first scan with its own normals) and keeps the registration whose weakest
-    direction of translation has the larger information per match: its poses are those of that target
-    alone. Open ground from rest (open-107, salo32) keeps the scan's; a highway start at 17 m/s
-    (highway-102, narrow32, as real) the map's, so both ways are taken."""
+    """A map variant's cold start registers the first scan pair against both cold-start targets (the map of
+    the first scan, the first scan with its own normals) and keeps the registration whose weakest
+    direction of translation has the larger information per match. Open ground from rest (open-107,
+    salo32) keeps the scan's; a highway start at 17 m/s (highway-102, narrow32, as real) the map's, so
+    both ways are taken, and each time the one nearer the truth."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     # without poles, whose agreed offset would start both registrations near the truth
     no_poles = variant(DEFAULT_VARIANT).replace(poles={"enabled": False})
@@ -249,79 +251,53 @@ def test_the_better_constrained_first_registration_is_kept():
     for family, seed, sensor in (("open", 107, "salo32"), ("highway", 102, "narrow32")):
         spec = next(s for s in suite((seed,), frames=3, families=(family,)) if s.kind == "real")
         seq = simulate(dataclasses.replace(spec, sensor=sensor))
-        runs = {kind: run_sequence(seq, no_poles.replace(map={"cold_start_target": kind}))
-                for kind in ("scan", "map", "better")}
-        weakest = {kind: runs[kind].diagnostics[1].translation_eigenvalues[0] for kind in ("scan", "map")}
-        kept = max(weakest, key=weakest.get)
-        np.testing.assert_array_equal(runs["better"].poses, runs[kept].poses)
-        assert runs["better"].diagnostics[1].translation_eigenvalues[0] == weakest[kept]
+        alone, kept = cold_start_registrations(seq, no_poles)
+        weakest = {kind: r.translation_eigenvalues[0] for kind, r in alone.items()}
+        assert kept.cold_start_kind == max(weakest, key=weakest.get)
+        assert kept.result is alone[kept.cold_start_kind]
         truth = se3.inverse(seq.poses[0]) @ seq.poses[1]
         # the kept registration is the one nearer the truth in both (measured, first frame: open 1.3 cm against
         # 0.82 m, weakest information 0.0051 against 0.0029; highway 1.0 against 1.8 cm, 0.029 against 0.024)
-        errors = {kind: np.linalg.norm(runs[kind].poses[1, :3, 3] - truth[:3, 3]) for kind in ("scan", "map")}
-        assert errors[kept] <= min(errors.values()) + 0.01, (family, errors, weakest)
-        chosen.append(kept)
+        errors = {kind: np.linalg.norm(r.T_target_source[:3, 3] - truth[:3, 3]) for kind, r in alone.items()}
+        assert errors[kept.cold_start_kind] <= min(errors.values()) + 0.01, (family, errors, weakest)
+        chosen.append(kept.cold_start_kind)
     assert chosen == ["scan", "map"], chosen
 
 
 def test_better_constrained_prefers_the_larger_weakest_information():
+    from odometry.cold_start import better_constrained
     from odometry.icp import RegistrationResult
-    from odometry.pipeline import better_constrained
 
     def result(weakest, singular=False):
         return RegistrationResult(np.eye(4), translation_eigenvalues=np.array([weakest, 0.1, 0.2]), singular=singular)
 
-    a, b = ("map", None, result(1e-3)), ("scan", None, result(5e-3))
-    assert better_constrained([a, b]) is b and better_constrained([b, a]) is b
-    assert better_constrained([a, ("scan", None, result(5e-3, singular=True))]) is a  # a singular one loses
-    assert better_constrained([a, ("scan", None, result(float("nan")))]) is a
-    tie = ("scan", None, result(1e-3))
-    assert better_constrained([a, tie]) is a  # on a tie the first (the map, in the pipeline's order)
+    a, b = result(1e-3), result(5e-3)
+    assert better_constrained([a, b]) == 1 and better_constrained([b, a]) == 0
+    assert better_constrained([a, result(5e-3, singular=True)]) == 0  # a singular one loses
+    assert better_constrained([a, result(float("nan"))]) == 0
+    assert better_constrained([a, result(1e-3)]) == 0  # on a tie the first (the map, in the pipeline's order)
 
 
-def test_cold_start_at_speed_keeps_the_coarse_estimate():
-    """A highway sequence that starts at 17 m/s (narrow32, as real), with ``match.cold_start_from_rest``: the
-    coarse pass finds the first frame's 1.7 m and standing still, refined, stays behind. Over all points
-    standing still fits better (each scan line falls on its own earlier line), so only the points facing
-    the difference may decide, and they keep the coarse estimate."""
+def test_cold_start_at_speed_finds_the_first_motion():
+    """A highway sequence that starts at 17 m/s (narrow32, as real): the default's cold start finds the first
+    frame's 1.7 m within centimetres (the coarse pass, with poles' offset first; standing still would be
+    1.7 m off)."""
     import dataclasses
 
-    from tools.experiments.generalize import simulate, suite
+    from tools.family_suite import simulate, suite
 
     spec = next(s for s in suite((102,), frames=2, families=("highway",)) if s.kind == "real")
     seq = simulate(dataclasses.replace(spec, sensor="narrow32"))
     gt = seq.poses
     assert np.linalg.norm(gt[1, :3, 3] - gt[0, :3, 3]) > 1.5  # at speed
-    run = run_sequence(seq, variant(DEFAULT_VARIANT).replace(match={"cold_start_from_rest": True}))
+    run = run_sequence(seq, variant(DEFAULT_VARIANT))
     assert np.linalg.norm(run.poses[1, :3, 3] - (se3.inverse(gt[0]) @ gt[1])[:3, 3]) < 0.1
 
 
-@pytest.mark.slow
-def test_capped_refinements_take_fewer_iterations_and_stay_on_the_truth(city_sequence):
-    """``deskew.refinement_iterations: 1``: each de-skew refinement is one Gauss-Newton step from the frame's
-    estimate instead of a converged ICP. With the de-skew redone only after the ICP, in two refinements
-    (``deskew.joint: false``; with the default's joint de-skew a refinement takes one step anyway), the
-    frames then take fewer ICP iterations, and the drift against the truth stays as small as with
-    converged refinements."""
-    gt, frames = city_sequence.poses, slice(0, 60)
-    errors, iterations = {}, {}
-    for cap in (None, 1):
-        deskew = {"joint": False, "refinements": 2, "refinement_iterations": cap}
-        run = run_sequence(city_sequence, variant(DEFAULT_VARIANT).replace(deskew=deskew), frames=frames)
-        rel = se3.inverse(gt[0]) @ gt[frames]
-        errors[cap] = float(np.linalg.norm(run.poses[:, :3, 3] - rel[:, :3, 3], axis=1).max())
-        iterations[cap] = np.mean([d.iterations for d in run.diagnostics[1:]])
-        assert np.mean([d.converged for d in run.diagnostics[1:]]) > 0.9
-    assert iterations[1] <= iterations[None] - 1.5, iterations
-    # (measured: 7.1 against 5.2 iterations a frame; largest position error 2.05 against 2.02 cm over 60 frames)
-    assert errors[None] < 0.05 and errors[1] < 1.25 * errors[None] + 0.005, errors
-
-
-def test_the_maps_spacing_check_answers_as_a_search_with_a_thinned_source(city_sequence, monkeypatch):
+def test_the_maps_spacing_check_answers_as_a_search(city_sequence, monkeypatch):
     """The map's spacing check takes each new point's distance to the map from the ICP's last search
-    (``Odometry._map_nearest_m``); with a thinned source (``filter.source_voxel_size_m``) only some
-    centroids were searched by the ICP and the rest are searched then. Every distance must be what a
-    search of the map gives (inf beyond the match bound)."""
+    (``Odometry._map_nearest_m``, reusing its cache). Every distance must be what a search of the map
+    gives (inf beyond the match bound)."""
     from odometry.local_map import LocalMap
 
     checked = []
@@ -335,11 +311,10 @@ def test_the_maps_spacing_check_answers_as_a_search_with_a_thinned_source(city_s
         return update(self, points_world, sensor_position_m, payload, nearest_m)
 
     monkeypatch.setattr(LocalMap, "update", checking_update)
-    cfg = variant(DEFAULT_VARIANT).replace(filter={"source_voxel_size_m": 0.7})
+    cfg = variant(DEFAULT_VARIANT)
     assert cfg.match.max_correspondence_distance_m == 1.0
-    run = run_sequence(city_sequence, cfg, frames=slice(0, 6), prefetch=0)
+    run_sequence(city_sequence, cfg, frames=slice(0, 6), prefetch=0)
     assert len(checked) == 4  # (frames 2-5: the first two rebuild the map after the cold start)
-    assert all(d.filter_counts["source"] < d.filter_counts["voxels"] for d in run.diagnostics)
 
 
 @pytest.mark.parametrize("name", ["salo-map", "salo", "bl-map"])
@@ -372,42 +347,33 @@ def test_the_standard_chain_in_one_compiled_pass_is_the_rejectors_one_by_one(cit
     assert np.linalg.norm(fast.poses[:, :3, 3] - rel[:, :3, 3], axis=1).max() < 0.05  # (and on the truth)
 
 
-def test_joint_deskew_takes_fewer_iterations_and_stays_on_the_truth(city_sequence):
-    """``deskew.joint`` (the default, with one refinement): the de-skew is redone at every ICP step and
-    once more after, where it was redone only after the ICP, twice. The frames take fewer ICP
-    iterations and the drift against the truth stays as small."""
+def test_the_deskew_brings_each_frames_motion_to_the_truth(city_sequence):
+    """With per-point times the scan is re-de-skewed at every ICP step (its de-skew motion moving halfway
+    towards the estimate's) and once more after the ICP (``deskew.refinements: 1``). On motion-distorted
+    city frames each frame's motion is far nearer the truth than without the de-skew, also without the
+    refinement, and the drift over 60 frames stays within centimetres."""
     gt, frames = city_sequence.poses, slice(0, 60)
-    errors, iterations = {}, {}
-    for joint in (False, True):
-        deskew = {"joint": True, "refinements": 1} if joint else {"joint": False, "refinements": 2}
+    true_motion = se3.inverse(gt[frames][:-1]) @ gt[frames][1:]
+    pair_cm, drift_m = {}, {}
+    for name, deskew in (("default", {}), ("no refinement", {"refinements": 0}), ("off", {"enabled": False})):
         run = run_sequence(city_sequence, variant(DEFAULT_VARIANT).replace(deskew=deskew), frames=frames)
+        P = run.poses
+        err = se3.inverse(true_motion) @ (se3.inverse(P[:-1]) @ P[1:])
+        pair_cm[name] = 100 * float(np.linalg.norm(err[2:, :3, 3], axis=1).mean())
         rel = se3.inverse(gt[0]) @ gt[frames]
-        errors[joint] = float(np.linalg.norm(run.poses[:, :3, 3] - rel[:, :3, 3], axis=1).max())
-        iterations[joint] = np.mean([d.iterations for d in run.diagnostics[2:]])
+        drift_m[name] = float(np.linalg.norm(P[:, :3, 3] - rel[:, :3, 3], axis=1).max())
         assert np.mean([d.converged for d in run.diagnostics[1:]]) > 0.9
-    assert variant(DEFAULT_VARIANT).deskew.joint and variant(DEFAULT_VARIANT).deskew.refinements == 1
-    assert iterations[True] <= 0.8 * iterations[False], iterations
-    # The joint de-skew alone (no refinement) must do the refinements' work: a frame's motion (after the
-    # first two) far nearer the truth than with the de-skew never redone
-    pair_cm = {}
-    for joint in (False, True):
-        cfg = variant(DEFAULT_VARIANT).replace(deskew={"joint": joint, "refinements": 0})
-        P = run_sequence(city_sequence, cfg, frames=frames).poses
-        err = se3.inverse(se3.inverse(gt[frames][:-1]) @ gt[frames][1:]) @ (se3.inverse(P[:-1]) @ P[1:])
-        pair_cm[joint] = 100 * float(np.linalg.norm(err[2:, :3, 3], axis=1).mean())
-    # (measured: 0.39 against 1.25 cm a frame)
-    assert pair_cm[True] < 0.5 * pair_cm[False], pair_cm
-    # (measured: 7.2 against 5.2 iterations a frame; largest position error 2.07 against 2.09 cm over 60 frames)
-    assert errors[True] < 0.05 and errors[True] < 1.25 * errors[False] + 0.005, errors
+    assert pair_cm["default"] < 0.5 * pair_cm["off"] and pair_cm["no refinement"] < 0.5 * pair_cm["off"], pair_cm
+    assert drift_m["default"] < 0.05, drift_m
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, changes", [("salo", {}), (DEFAULT_VARIANT, {}), ("bl", {"match": {"target": "raw"}}),
+@pytest.mark.parametrize("name, changes", [("salo", {}), (DEFAULT_VARIANT, {}), ("ncf-map", {}),
                                            ("salo", {"deskew": {"enabled": False}})])
 def test_prefetching_the_next_scan_gives_the_poses_of_one_frame_after_another(city_sequence, name, changes):
     """``run_sequence`` prepares the next scans on threads of their own (``register_frames``): the poses
-    are those of ``Odometry.register`` called frame after frame, to the last bit (also with a raw target,
-    filtered after the de-skew, and without the de-skew), and the shipped variants are on the truth."""
+    are those of ``Odometry.register`` called frame after frame, to the last bit (also without the
+    de-skew), and the shipped variants are on the truth."""
     gt, frames = city_sequence.poses, slice(0, 20)
     cfg = variant(name).replace(**changes)
     runs = [run_sequence(city_sequence, cfg, frames=frames, prefetch=p).poses for p in (2, 1, 0)]

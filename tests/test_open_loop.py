@@ -1,8 +1,8 @@
-"""Open-loop odometry (``run_sequence(true_poses=...)``, ``tools.open_loop``) against the simulator's truth.
+"""Open-loop odometry (``odometry.open_loop``, ``tools.open_loop``) against the simulator's truth.
 
 The state follows the true motion, so the returned poses are the truth; each frame's own
-estimate is kept in its diagnostics and must be as close to the true motion as a
-registration against a true-pose map makes it.
+estimate is kept beside them and must be as close to the true motion as a registration
+against a true-pose map makes it.
 """
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from odometry.config import variant
-from odometry.pipeline import OdometryError, run_sequence
+from odometry.open_loop import run_open_loop as odometry_open_loop
+from odometry.pipeline import OdometryError
 from scenes import build_scene
 from simlidar import se3
 from simlidar.in_memory import simulate_in_memory
@@ -30,10 +31,11 @@ def city_frames():
 def test_open_loop_state_follows_the_truth_and_keeps_each_estimate(city_frames):
     seq = city_frames
     truth = se3.inverse(seq.poses[0]) @ seq.poses
-    run = run_sequence(seq, variant("salo-map"), true_poses=seq.poses)
+    result = odometry_open_loop(seq, variant("salo-map"), seq.poses)
+    run = result.run
     np.testing.assert_allclose(run.poses, truth, atol=1e-9)  # the state took the true motion
-    assert run.diagnostics[0].estimated_motion is None
-    errors = open_loop_errors(seq.poses, run.diagnostics)
+    assert np.isnan(result.estimated_motions[0]).all()
+    errors = open_loop_errors(seq.poses, result.estimated_motions, run.diagnostics)
     moved = errors.travelled_m
     assert moved.min() > 0.5  # the car moves: a frozen estimate would err by its motion
     assert not errors.extrapolated.any()
@@ -57,30 +59,32 @@ def test_open_loop_errors_measure_a_known_bias(city_frames):
     true = se3.inverse(seq.poses[:-1]) @ seq.poses[1:]
 
     class Diag:
-        def __init__(self, T, extrapolated=False):
-            self.estimated_motion = T
+        def __init__(self, extrapolated=False):
             self.extrapolated = extrapolated
             self.translation_eigenvalues = np.array([0.2, 0.3, 0.5])
 
     short = true.copy()
     unit = true[:, :3, 3] / np.linalg.norm(true[:, :3, 3], axis=1, keepdims=True)
     short[:, :3, 3] -= 0.02 * unit
-    errors = open_loop_errors(seq.poses, [Diag(None)] + [Diag(T) for T in short])
+    estimates = np.concatenate([np.full((1, 4, 4), np.nan), short])
+    errors = open_loop_errors(seq.poses, estimates, [Diag() for _ in estimates])
     np.testing.assert_allclose(errors.along_m, -0.02, atol=1e-9)
     np.testing.assert_allclose(errors.translation_m, 0.02, atol=1e-9)
     assert errors.along_bias_pct == pytest.approx(-100 * 0.02 * len(true) / errors.travelled_m.sum())
     # an extrapolated frame's "estimate" (the guess) is left out of the errors
-    marked = open_loop_errors(seq.poses, [Diag(None)] + [Diag(T, k == 3) for k, T in enumerate(short)])
+    marked = open_loop_errors(seq.poses, estimates, [Diag()] + [Diag(k == 3) for k in range(len(short))])
     assert np.isnan(marked.translation_m[3]) and np.isnan(marked.along_m[3])
     assert marked.extrapolated.sum() == 1
     assert np.isnan(marked.weakest_information[3])
     np.testing.assert_array_equal(np.delete(marked.weakest_information, 3), 0.2)
     with pytest.raises(ValueError, match="11 frame diagnostics for 12 true poses"):
-        open_loop_errors(seq.poses, [Diag(None)] + [Diag(T) for T in short[:-1]])
+        open_loop_errors(seq.poses, estimates, [Diag() for _ in estimates[:-1]])
+    with pytest.raises(ValueError, match="11 estimated motions for 12 true poses"):
+        open_loop_errors(seq.poses, estimates[:-1], [Diag() for _ in estimates])
 
 
 def test_open_loop_through_the_tool_and_a_wrong_number_of_poses(city_frames):
     errors = run_open_loop(city_frames, city_frames.poses, "default")
     assert len(errors.translation_m) == len(city_frames) - 1
     with pytest.raises(OdometryError, match="11 true poses for 12 frames"):
-        run_sequence(city_frames, variant("bl"), true_poses=city_frames.poses[:-1])
+        odometry_open_loop(city_frames, variant("bl"), city_frames.poses[:-1])

@@ -9,6 +9,7 @@ tests, in test_scenes*.py, test_sensor.py, test_sweep_runner.py and test_icp.py,
 from __future__ import annotations
 
 import io
+import re
 from contextlib import redirect_stdout
 from pathlib import Path
 
@@ -146,7 +147,7 @@ def test_salo_odometry_keys_lists_the_declarations_and_the_variants(capsys):
     assert main(["odometry", "--keys"]) == 0
     out = capsys.readouterr().out
     assert help_text(schema(OdometryConfig), header=True) in out
-    assert "ncf.max_normal_std_deg" in out and "filtered|raw|map" in out and "[0, 1)" in out
+    assert "ncf.max_normal_std_deg" in out and "filtered|map" in out and "[0, 1)" in out
     assert variant_changes()["bl"] == {"ncf.enabled": False, "gcr.enabled": False} and variant_changes()["salo"] == {}
     assert "  bl        ncf.enabled: false, gcr.enabled: false\n" in out
 
@@ -160,6 +161,30 @@ def test_the_parameters_page_is_what_the_declarations_make():
     odometry = [name for name, m in schema(OdometryConfig).walk() if not isinstance(m, Section)]
     assert "filter.voxel_size_m" in odometry and "ncf.max_normal_std_deg" in odometry
     sensor = [name for name, m in SENSOR_FILE.walk() if not isinstance(m, Section)]
+    assert "weather.fog.mor_m" in sensor and "receiver.detection_range_m" in sensor
     assert "imu.gyroscope_noise_density" in sensor
     for key in (*sensor, *schema(SweepSpec).names, *schema(CommonParams).names, *odometry):
         assert f"| `{key}` |" in page, key
+
+
+def test_every_odometry_key_says_why_it_exists():
+    """docs/keys.md lists every declared odometry key with a reason, and no key that is not declared."""
+    page = (PAGE.parent / "keys.md").read_text()
+    declared = [name for name, m in schema(OdometryConfig).walk() if not isinstance(m, Section)]
+    listed = re.findall(r"^\| `([a-z_.]+)` \| \S", page, re.M)
+    assert sorted(listed) == sorted(declared)
+
+
+def test_a_removed_key_is_refused_with_its_reason():
+    """Options measured and not kept are gone; a config or --set that names one is told so, with the record."""
+    from odometry.config import REMOVED_KEYS, ConfigError, changes_from_assignments, config_from_dict
+
+    for dotted in REMOVED_KEYS:
+        with pytest.raises(ConfigError, match=f"{dotted}.*was removed.*Measured and not kept"):
+            changes_from_assignments([f"{dotted}=1"])
+        section, key = dotted.split(".")
+        with pytest.raises(ConfigError, match="was removed"):
+            config_from_dict({section: {key: 1}}, origin="old.yaml")
+    with pytest.raises(ConfigError, match="'raw' was removed"):
+        changes_from_assignments(["match.target=raw"])
+

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from simlidar import se3
-from tools.experiments.peer import (
+from tools.peers import (
     PEERS,
     UNDESKEWED_INSTANT,
     peer_unavailable_reason,
@@ -99,16 +99,16 @@ def test_peer_extra_floors_are_the_checked_versions():
 
 
 def test_missing_peer_says_how_to_install(monkeypatch):
-    from tools.experiments import peer
+    from tools import peers
 
-    monkeypatch.setitem(peer.PEERS, "nope", dataclasses.replace(PEERS["kiss-icp"], name="nope",
-                                                                 module="no_such_module_here"))
-    assert peer.peer_unavailable_reason("nope") == "not installed (pip install -e '.[peer]')"
+    monkeypatch.setitem(peers.PEERS, "nope", dataclasses.replace(PEERS["kiss-icp"], name="nope",
+                                                                  module="no_such_module_here"))
+    assert peers.peer_unavailable_reason("nope") == "not installed (pip install -e '.[peer]')"
     with pytest.raises(ImportError, match="not installed"):
-        peer.require_peer("nope")
-    monkeypatch.setitem(peer.PEERS, "old", dataclasses.replace(PEERS["kiss-icp"], name="old", module="numpy",
-                                                                distribution="numpy", min_version="999"))
-    assert "older than 999" in peer.peer_unavailable_reason("old")
+        peers.require_peer("nope")
+    monkeypatch.setitem(peers.PEERS, "old", dataclasses.replace(PEERS["kiss-icp"], name="old", module="numpy",
+                                                                 distribution="numpy", min_version="999"))
+    assert "older than 999" in peers.peer_unavailable_reason("old")
 
 
 # ---------------------------------------------------------------- against simulated ground truth
@@ -205,7 +205,7 @@ def test_peer_poses_belong_to_sweep_starts(drives, name, kind):
     run = run_peer(name, seq)
     gt = seq.poses
     assert run.poses.shape == gt.shape and np.allclose(run.poses[0], np.eye(4))
-    assert run.config["frames_with_times"] == (len(gt) if kind == "times" else 0)
+    assert run.settings["frames_with_times"] == (len(gt) if kind == "times" else 0)
     # The instant: within 0.3 frame of the sweep starts (measured: 0.00-0.02; KISS-ICP with times -0.18)...
     lag = residual_lag(gt, run.poses)
     assert abs(lag) < 0.3, lag

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from odometry.config import DEFAULT_VARIANT, variant
-from odometry.kernels import foreground_runs
+from odometry.kernels.poles import foreground_runs
 from odometry.pipeline import run_sequence
 from odometry.poles import PoleMap, PoleTarget, extract_poles, pole_rows, pole_translation
 from simlidar.in_memory import simulate_in_memory

@@ -25,7 +25,7 @@ def test_the_block_is_about_ten_lines_of_simulate_run_evaluate():
                                                                                                        "from"))]
     assert len(code) <= 10
     block = readme_api_block()
-    for name in ("simulate_scene", "open_sequence", "register_frame", "run_method_staged", "evaluate_trajectory"):
+    for name in ("simulate_scene", "open_sequence", "register_frame", "run_method", "evaluate_trajectory"):
         assert name in block
 
 

@@ -109,7 +109,7 @@ def test_widening_keeps_two_ring_neighbourhoods_and_respects_the_distance():
 
 
 def widened_by_numpy(cloud, rings, query_points, idx, n_rings, n_columns, max_distance_m):
-    """The rule of ``kernels.adjacent_ring_neighbourhoods``, written with numpy arrays (the reference)."""
+    """The rule of ``kernels.range_image.adjacent_ring_neighbourhoods``, written with numpy arrays (the reference)."""
     idx = np.array(idx, dtype=np.intp)
     m, k = idx.shape
     half = k // 2

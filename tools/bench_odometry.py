@@ -7,7 +7,8 @@
     python -m tools.bench_odometry --prefetch both   # ours also on one thread (no scan prepared ahead)
 
 For each sensor the sequence is simulated once into memory (``simlidar.in_memory``,
-motion distortion on, per-point times given: the frames every method gets), then
+motion distortion on, per-point times given) and its sensor's view (``tools.staging.sensor_view``:
+no truth) is what every method gets, through the one interface (``tools.methods.run_method``);
 every variant of ours (the paper's scan-to-scan BL / NCF / SALO, their scan-to-map
 twins, and the default configuration) and every installed peer (KISS-ICP,
 GenZ-ICP, small_gicp s2m; ``pip install -e '.[peer]'``) runs over the same frames
@@ -24,16 +25,15 @@ absolute figures drift. Prints figures; asserts nothing.
 from __future__ import annotations
 
 import argparse
-import time
 import tracemalloc
 
 import numpy as np
 
 from odometry.config import DEFAULT_VARIANT, ConfigError, changes_from_assignments, config_from_dict, variant
+from odometry.diagnostics import STAGES
 from odometry.metrics import evaluate_trajectory
-from odometry.pipeline import STAGES, Odometry, ScanInput, register_frames
-from simlidar.sequence import deskew_times
-from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
+from tools.methods import OursMethod, PeerMethod, run_method
+from tools.peers import PEERS
 
 OURS = ("bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
 REFERENCE_PEER = "kiss-icp"
@@ -68,27 +68,24 @@ def t_err_pct(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, bool]:
     return evaluate_trajectory(T_gt, T_est, lengths_m=SHORT_SEGMENTS_M).t_err_pct, True
 
 
-def run_ours(seq, name: str, frames: int | None = None, changes: dict | None = None,
+def run_ours(view, name: str, frames: int | None = None, changes: dict | None = None,
              prefetch: int | None = None) -> tuple[np.ndarray, float, dict]:
-    """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` over the sequence's frames.
-    changes: parameters changed (``--set``), nested by stage as a config YAML holds them."""
-    odo = Odometry(config_from_dict(changes or {}, base=variant(name)), seq.sensor)
-    n = len(seq) if frames is None else frames
-    data = [seq[k] for k in range(n)]
-    # (the per-point times are worked out inside the clock, as KISS-ICP's run does for its timestamps)
-    scans = (ScanInput(f.points, deskew_times(seq, f), f.ring, float(seq.times[k])) for k, f in enumerate(data))
-    t = time.perf_counter()
-    for _ in register_frames(odo, scans, prefetch):
-        pass
-    seconds = time.perf_counter() - t
-    stages = {s: 1000 * np.mean([d.seconds.get(s, 0.0) for d in odo.diagnostics[1:]]) for s in STAGES}
-    return np.stack(odo.poses), seconds, stages
+    """Poses (F, 4, 4), seconds and mean ms per stage of variant ``name`` over the first ``frames`` frames of
+    ``view`` (default all; a sensor's view, read as it is). changes: parameters changed (``--set``), nested
+    by stage as a config YAML holds them. prefetch: scans prepared ahead (``OursMethod``).
+
+    The clock runs over the frame loop, reading each frame and working out its per-point times included,
+    as it does for the peers (``tools.peers.run_frames``)."""
+    method = OursMethod(name, config_from_dict(changes or {}, base=variant(name)), prefetch=prefetch)
+    run = run_method(method, view, stage=False, frames=None if frames is None else slice(0, frames))
+    stages = {s: 1000 * np.mean([d.seconds.get(s, 0.0) for d in run.diagnostics[1:]]) for s in STAGES}
+    return run.poses, run.seconds, stages
 
 
-def peak_memory_mb(seq, name: str, frames: int, changes: dict | None = None, prefetch: int | None = None) -> float:
+def peak_memory_mb(view, name: str, frames: int, changes: dict | None = None, prefetch: int | None = None) -> float:
     """Peak traced allocation (numpy included) while registering ``frames`` frames (slows the run: apart)."""
     tracemalloc.start()
-    run_ours(seq, name, frames, changes, prefetch)
+    run_ours(view, name, frames, changes, prefetch)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return peak / 1e6
@@ -102,24 +99,27 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
     stage times (ms per frame, median over rounds). prefetch: each of ours runs once per value, with
     that many scans prepared ahead on threads of their own (``register_frames``; 0: one thread; None:
     as ``salo odometry`` runs it)."""
+    from tools.staging import sensor_view
+
     seq = simulate(scene, sensor, frames)
+    view = sensor_view(seq)  # what every method gets: the sensor's data, made once
     points = np.mean([len(p) for p in seq.points])
     path_m = float(evaluate_trajectory(seq.poses, seq.poses).path_length_m)
     print(f"\n## {scene}, {sensor}: {len(seq)} frames, {points:,.0f} points per scan, {path_m:.0f} m"
           + (f", {repeat} interleaved rounds" if repeat > 1 else ""))
-    cfg = variant(DEFAULT_VARIANT)
     methods = []  # (label, run() -> (poses, seconds, stages or None))
     ahead = {}  # label -> scans prepared ahead (ours)
     for name, spec in PEERS.items():
         if only and name not in only:
             continue
-        reason = peer_unavailable_reason(name)
+        peer = PeerMethod(name)  # on our default configuration's range limits
+        reason = peer.unavailable()
         if reason is not None:
             print(f"{spec.label}: {reason}")
             continue
 
-        def run_a_peer(name=name):
-            run = run_peer(name, seq, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m)
+        def run_a_peer(peer=peer):
+            run = run_method(peer, view, stage=False)
             return run.poses, run.seconds, None
 
         methods.append((spec.label, name, run_a_peer))
@@ -130,11 +130,11 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
         for p in prefetch:
             how = "" if p is None else ", 1 thread" if p == 0 else f", {p} ahead"
             label = (f"default ({v})" if name == "default" else name) + how
-            methods.append((label, v, lambda v=v, p=p: run_ours(seq, v, changes=changes, prefetch=p)))
+            methods.append((label, v, lambda v=v, p=p: run_ours(view, v, changes=changes, prefetch=p)))
             ahead[label] = p
         # (a warm-up on three frames, untimed: the compiled kernels are loaded, or compiled on a
         # fresh install, before the clock runs, as the peers' code is compiled ahead)
-        run_ours(seq, v, frames=min(3, len(seq)), changes=changes)
+        run_ours(view, v, frames=min(3, len(seq)), changes=changes)
     seconds = {label: [] for label, _, _ in methods}
     stages, errors = {}, {}
     for _ in range(repeat):
@@ -158,7 +158,7 @@ def bench(scene: str, sensor: str, frames: int, memory_frames: int, only: set[st
             print(line + f"{'':>8s}")
             continue
         per_stage = {s: float(np.median([r[s] for r in stages[label]])) for s in STAGES}
-        mem = peak_memory_mb(seq, v, memory_frames, changes, ahead[label]) if memory_frames > 0 else float("nan")
+        mem = peak_memory_mb(view, v, memory_frames, changes, ahead[label]) if memory_frames > 0 else float("nan")
         other = 1000 * spent / len(seq) - sum(per_stage.values())
         print(line + f"{mem:8.0f} " + " ".join(f"{per_stage[s]:8.1f}" for s in STAGES) + f" {other:8.1f}")
 

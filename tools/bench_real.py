@@ -9,7 +9,9 @@ too short for 100 m segments; as their README says, they are scored by the
 per-pair relative pose error: translation (cm) and rotation (deg) of each
 consecutive pair's estimated motion against the true one, averaged. KITTI is read
 with the HDL-64E model and its 0.205 deg vertical-angle correction for our
-methods; the peers get the points as read. Prints figures; asserts nothing.
+methods; the peers get the points as read. Every method runs through the one
+interface (``tools.methods.run_method``) on the excerpt as read. Prints figures;
+asserts nothing.
 """
 
 from __future__ import annotations
@@ -21,10 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from odometry.config import DEFAULT_VARIANT, VARIANTS, ConfigError, changes_from_assignments, config_from_dict, variant
-from odometry.pipeline import run_sequence
 from simlidar import se3
 from simlidar.dataset import open_sequence
-from tools.experiments.peer import PEERS, peer_unavailable_reason, run_peer
+from tools.methods import OursMethod, PeerMethod, run_method
+from tools.peers import PEERS
 
 REAL_DATA = Path(os.environ.get("SALO_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"))
 EXCERPTS = {  # name: (folder below the real-data root, sensor preset, KITTI correction)
@@ -59,15 +61,16 @@ def main() -> None:
         seq = open_sequence(args.root / folder, sensor=sensor)
         for m in methods:
             if m in PEERS:
-                reason = peer_unavailable_reason(m)
-                if reason:
-                    print(f"{name:11s} {m:20s} {reason}")
-                    continue
-                poses = run_peer(m, seq).poses
+                method = PeerMethod(m)
             else:
-                cfg = config_from_dict(changes, base=variant(m), origin="--set").replace(
-                    clean={"kitti_vertical_correction_deg": 0.205 if kitti else 0.0})
-                poses = run_sequence(seq, cfg).poses
+                method = OursMethod(m, config_from_dict(changes, base=variant(m), origin="--set").replace(
+                    clean={"kitti_vertical_correction_deg": 0.205 if kitti else 0.0}))
+            reason = method.unavailable()
+            if reason:
+                print(f"{name:11s} {m:20s} {reason}")
+                continue
+            # (read as given: the excerpt's sensor is chosen here, not by a file beside the scans)
+            poses = run_method(method, seq, stage=False).poses
             t, r = pair_errors(seq.poses, poses)
             print(f"{name:11s} {m + (' (default)' if m == DEFAULT_VARIANT else ''):20s} {t:6.2f} {r:7.3f}")
 

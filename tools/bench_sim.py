@@ -8,12 +8,18 @@
     python -m tools.bench_sim --memory 1000   # also a 1000-frame sequence: peak RSS stays flat
     python -m tools.bench_sim --big-world 2000000 --e2e-frames 0   # a tiled city of >= 2M triangles:
                                               # load time, sweeps/s, memory over a 300-frame sequence
+    python -m tools.bench_sim --weather-repeats 0  # skip the weather's cost (simlidar.weather)
 
 The end-to-end run calls ``tools.runners.simulate_scene``, the function behind
 ``salo simulate --scene``, writing the sequence (scans and truth) to a temporary
 folder, and casts the same sequence's rays (each column from its own firing
 pose) with the bare 2-thread Embree call in the same run: sweeps/s of both, the
 ratio, and bytes on disk per return.
+
+The weather's cost: CPU time per sweep of the same sweeps (the end-to-end city's
+sensor and path, interleaved so that other jobs on the machine weigh on each alike)
+with the sensor as it is, with the receiver's power model on in clear air, and in
+dense fog, rain and snow, each against the sensor as it is.
 
 Prints figures; it asserts nothing (speed is measured here, never in tests).
 """
@@ -203,6 +209,46 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
               f"imu.csv + imu_truth.csv {imu_bytes / 1e6:.2f} MB")
 
 
+WEATHER_RUNS = {
+    "receiver on, clear air": {},
+    "dense fog, MOR 60 m": {"fog": {"enabled": True, "mor_m": 60.0}},
+    "light fog, MOR 800 m": {"fog": {"enabled": True, "mor_m": 800.0}},
+    "rain, 20 mm/h": {"rain": {"enabled": True, "rate_mm_h": 20.0}},
+    "snow, 1.5 mm/h": {"snow": {"enabled": True, "rate_mm_h": 1.5}},
+}
+
+
+def bench_weather(scene_name: str, seed: int, sensor_name: str, repeats: int) -> None:
+    """CPU per sweep with the receiver and each weather on, against the sensor as it is, sweeps interleaved."""
+    from simlidar.raycast import Raycaster
+    from simlidar.weather import ReceiverParams, Weather
+    from tools.worlds import build_scene_world
+
+    scene = build_scene_world(scene_name, seed, {})
+    base = load_sensor(sensor_name)
+    rc = Raycaster(scene.world.vertices, scene.world.faces)  # one BVH for all: the same rays cast alike
+    sims = {"as it is": SweepSimulator(scene.world, base, seed=seed, raycaster=rc)}
+    for name, weather in WEATHER_RUNS.items():
+        sensor = base.with_overrides(receiver=ReceiverParams(enabled=True), weather=Weather.from_dict(weather))
+        sims[name] = SweepSimulator(scene.world, sensor, seed=seed, raycaster=rc)
+    cpu = dict.fromkeys(sims, 0.0)
+    returns = dict.fromkeys(sims, 0)
+    t0 = 20.0
+    for sim in sims.values():
+        sim.sweep(scene.trajectory, t0)  # warm up
+    for k in range(repeats):
+        for name, sim in sims.items():
+            c = time.process_time()
+            returns[name] += len(sim.sweep(scene.trajectory, t0 + 0.1 * k, frame_index=k))
+            cpu[name] += time.process_time() - c
+    ref = cpu["as it is"]
+    print(f"weather: {repeats} sweeps each of {sensor_name} in {scene_name} seed {seed} from {t0:g} s, CPU per sweep "
+          "(all threads), interleaved")
+    for name in sims:
+        print(f"  {name:24s} {1e3 * cpu[name] / repeats:6.0f} ms  {cpu[name] / ref:5.2f}x the sensor as it is   "
+              f"({returns[name] / repeats:,.0f} returns)")
+
+
 def floor_write_cpu_s(folder: Path, frames: int, sizes: dict[str, int]) -> float:
     """CPU seconds a frame to write a sequence's bytes (``sizes``: bytes per subfolder over ``frames``
     frames) as new files, each in one write with its sha256, by the writer's own
@@ -330,6 +376,8 @@ def main() -> None:
     ap.add_argument("--big-frames", type=int, default=300, help="frames of the big-world run")
     ap.add_argument("--tmp", help="folder for the end-to-end sequence (default: the system's temporary folder)")
     ap.add_argument("--imu", action="store_true", help="run the end-to-end simulation again with the IMU on")
+    ap.add_argument("--weather-repeats", type=int, default=20,
+                    help="sweeps of each weather run (0: skip the weather's cost)")
     args = ap.parse_args()
     t = time.perf_counter()
     world = bench_world()
@@ -337,6 +385,8 @@ def main() -> None:
     bench_sweep(world, args.sensor, args.repeats)
     if args.e2e_frames:
         bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp, args.imu)
+    if args.weather_repeats:
+        bench_weather(args.e2e_scene, args.e2e_seed, args.sensor, args.weather_repeats)
     if args.big_world:
         bench_big_world(args.big_world, args.sensor, args.big_frames, args.tmp)
     if args.memory:

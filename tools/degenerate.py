@@ -6,10 +6,10 @@
   where the smallest translational eigenvalue is below ``TRUTH_THRESHOLD``, the
   odometry's own default flag (``degeneracy.degenerate_eigenvalue``, per match: the
   same normalisation).
-- A run of our odometry: its diagnostics CSV (``odometry.pipeline.CSV_COLUMNS``),
+- A run of our odometry: its diagnostics CSV (``odometry.diagnostics.CSV_COLUMNS``),
   frames flagged ``degenerate`` or ``remapped``.
 
-Both give ``odometry.pipeline.DegenerateStretch`` runs of frames with their mean
+Both give ``odometry.diagnostics.DegenerateStretch`` runs of frames with their mean
 weakest direction (``stretches_of``); ``salo simulate``, ``salo odometry``, ``salo
 evaluate`` and ``salo bench`` print or shade them.
 """
@@ -42,8 +42,8 @@ class FrameConstraints:
     remapped: np.ndarray | None = None
 
     def stretches(self, min_gap: int = 1) -> list:
-        """The weak frames as ``odometry.pipeline.DegenerateStretch`` runs."""
-        from odometry.pipeline import stretches_of
+        """The weak frames as ``odometry.diagnostics.DegenerateStretch`` runs."""
+        from odometry.diagnostics import stretches_of
 
         return stretches_of(self.frames, self.weak, self.directions, self.t_eig0, self.remapped, min_gap)
 
@@ -75,7 +75,7 @@ def truth_constraints(path: str | Path, threshold: float = TRUTH_THRESHOLD) -> F
 
 
 def diagnostics_constraints(path: str | Path) -> FrameConstraints:
-    """A run's diagnostics CSV (``odometry.pipeline.write_diagnostics_csv``) -> its own ``FrameConstraints``."""
+    """A run's diagnostics CSV (``odometry.diagnostics.write_diagnostics_csv``) -> its own ``FrameConstraints``."""
     path = Path(path)
     rows = _read_rows(path)
     remapped = _column(rows, "remapped", path) > 0

@@ -81,11 +81,19 @@ class ExportResult:
 
 
 # ---------------------------------------------------------------- helpers
+def slice_text(frames: slice | None) -> str:
+    """A frame range as typed: ``A:B`` or ``A:B:STEP`` (``:`` for all)."""
+    if frames is None:
+        return ":"
+    text = f"{'' if frames.start is None else frames.start}:{'' if frames.stop is None else frames.stop}"
+    return text + (f":{frames.step}" if frames.step not in (None, 1) else "")
+
+
 def frame_indices(seq, frames: slice | None) -> np.ndarray:
     """Indices of the frames a slice selects; an error when it selects none."""
     idx = np.arange(len(seq))[frames or slice(None)]
     if len(idx) == 0:
-        raise ExportError(f"{seq.path}: no frames selected ({frames})")
+        raise ExportError(f"{seq.path}: frames {slice_text(frames)} select none of its {len(seq)} frames")
     return idx
 
 
@@ -251,7 +259,7 @@ def export_tum(seq, out: str | Path, frames: slice | None = None, *, force: bool
     """Write the ground-truth trajectory in TUM format (see the module doc)."""
     out = Path(out)
     if out.exists() and not force:
-        raise ExportError(f"{out}: already exists (use --force to replace it)")
+        raise ExportError(f"{out}: already exists (replace it with --force, or force=True in Python)")
     if seq.poses is None:
         raise ExportError(f"{seq.path}: no ground-truth poses to write as a trajectory")
     idx = frame_indices(seq, frames)

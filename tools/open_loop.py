@@ -6,8 +6,8 @@
 A closed-loop run mixes two things: the error each registration makes, and the drift
 those errors feed back (a map or a motion prior built from wrong poses). Here the
 odometry runs as always, but after each frame its state (pose, motion prior, de-skew,
-map or target scan) advances with the true motion (``odometry.pipeline.run_sequence``'s
-``true_poses``), so every frame meets a target the truth built. What remains is the
+map or target scan) advances with the true motion (``odometry.open_loop.run_open_loop``),
+so every frame meets a target the truth built. What remains is the
 registration's own error, printed per method over the same frames:
 
 - per-frame translation error |t(true^-1 estimate)|, cm: median and 90th percentile;
@@ -71,16 +71,19 @@ class OpenLoopErrors:
         return float(100.0 * self.along_m[ok].sum() / max(self.travelled_m[ok].sum(), 1e-12))
 
 
-def open_loop_errors(true_poses: np.ndarray, diagnostics: list) -> OpenLoopErrors:
-    """Errors of each frame's estimate (``FrameDiagnostics.estimated_motion``) against the true motion.
+def open_loop_errors(true_poses: np.ndarray, estimated_motions: np.ndarray, diagnostics: list) -> OpenLoopErrors:
+    """Errors of each frame's estimate against the true motion.
 
     true_poses: (F, 4, 4) of the frames run, in order (``true_poses[run.frame_indices]`` for a slice);
-    diagnostics: the run's F frame diagnostics.
+    estimated_motions: (F, 4, 4) each frame's estimate of its motion (``OpenLoopRun.estimated_motions``;
+    the first is not used); diagnostics: the run's F frame diagnostics.
     """
     if len(diagnostics) != len(true_poses):
         raise ValueError(f"{len(diagnostics)} frame diagnostics for {len(true_poses)} true poses")
     true = se3.inverse(true_poses[:-1]) @ true_poses[1:]
-    est = np.stack([d.estimated_motion for d in diagnostics[1:]])
+    if len(estimated_motions) != len(true_poses):
+        raise ValueError(f"{len(estimated_motions)} estimated motions for {len(true_poses)} true poses")
+    est = np.array(estimated_motions[1:], dtype=float)
     extrapolated = np.array([d.extrapolated for d in diagnostics[1:]], dtype=bool)
     est[extrapolated] = np.nan  # every error of those frames is nan from here on
     err = se3.inverse(true) @ est
@@ -97,14 +100,14 @@ def open_loop_errors(true_poses: np.ndarray, diagnostics: list) -> OpenLoopError
 
 def run_open_loop(sequence, true_poses: np.ndarray, method: str, changes: dict | None = None) -> OpenLoopErrors:
     """Run our ``method`` (a variant name or ``default``) open loop over an in-memory sequence."""
-    from odometry.pipeline import run_sequence
+    from odometry.open_loop import run_open_loop as odometry_open_loop
     from tools.methods import our_config
     from tools.staging import DEFAULT_FIELDS, sensor_view
 
     config = our_config(method, changes)
     view = sensor_view(sequence, DEFAULT_FIELDS)  # what the odometry sees: no poses, no truth
-    run = run_sequence(view, config, true_poses=true_poses)
-    return open_loop_errors(true_poses, run.diagnostics)
+    result = odometry_open_loop(view, config, true_poses)
+    return open_loop_errors(true_poses, result.estimated_motions, result.run.diagnostics)
 
 
 def plot_along(errors: dict[str, OpenLoopErrors], title: str, path: Path) -> None:
@@ -129,7 +132,7 @@ def plot_along(errors: dict[str, OpenLoopErrors], title: str, path: Path) -> Non
 
 def main(argv: list[str] | None = None) -> int:
     from odometry.config import ConfigError, changes_from_assignments
-    from tools.experiments.generalize import EVALUATION_SEEDS, KINDS, SENSORS, simulate, suite
+    from tools.family_suite import EVALUATION_SEEDS, KINDS, SENSORS, simulate, suite
     from tools.methods import MethodError, our_config
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -1,11 +1,13 @@
-"""The two jobs every command, sweep, experiment and the demo do, written once.
+"""What every command, sweep, experiment and the demo need around a run, written once.
 
 - ``simulate_scene``: a built scene (``tools.worlds.SceneWorld``) to a simulated
   sequence folder: check that the path has room for the frames, record the
   scene and the noise in the manifest, simulate.
-- ``run_method``: our odometry over a sequence: run it, write its outputs
-  (KITTI poses, the per-frame diagnostics CSV, the resolved config, TUM), count
-  the frames it flagged, evaluate against the ground truth.
+- ``MethodRun``: what a method's run gives, whichever the method (``tools.methods.run_method``
+  makes it): poses, time, the frames it flagged (``FrameFlags``), its settings.
+- ``RunFiles`` / ``write_run_files``: where a run's outputs go (KITTI poses, the per-frame
+  diagnostics CSV, the resolved config, TUM) and writing them; ``evaluate_against_truth``
+  and ``segment_errors_per_100m``: its figures against the sequence's ground truth.
 
 ``salo simulate`` / ``salo odometry``, the sweep tasks, the experiments'
 sequence cache and table, and the demo call these; what differs between them
@@ -15,7 +17,7 @@ sequence cache and table, and the demo call these; what differs between them
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -74,19 +76,20 @@ def simulate_scene(scene, sensor, out: str | Path, frames: int, *, seed: int, st
     return SimulatedSequence(Path(path), frames, time.perf_counter() - t0)
 
 
-# ---------------------------------------------------------------- a method over a sequence
+# ---------------------------------------------------------------- a method's run
 @dataclass(frozen=True)
 class FrameFlags:
     """Frames a run flagged: ``extrapolated`` (its pose is the constant-velocity guess, no ICP result),
-    ``degenerate`` (weakly constrained), ``remapped`` (the motion prior kept in a weak direction)."""
+    ``degenerate`` (weakly constrained), ``remapped`` (the motion prior kept in a weak direction);
+    None: not known (a table read back from its files keeps the first two only)."""
 
     extrapolated: int
     degenerate: int
-    remapped: int
+    remapped: int | None
 
     @classmethod
     def of(cls, diagnostics) -> FrameFlags:
-        """Counted over ``odometry.pipeline.FrameDiagnostics``, one per frame."""
+        """Counted over ``odometry.diagnostics.FrameDiagnostics``, one per frame."""
         return cls(sum(d.extrapolated for d in diagnostics), sum(d.degenerate for d in diagnostics),
                    sum(d.remapped > 0 for d in diagnostics))
 
@@ -96,7 +99,7 @@ class RunFiles:
     """Where a run's outputs go (None: not written).
 
     poses: KITTI poses, one 3x4 line per frame (first = identity). diagnostics:
-    the per-frame CSV (``odometry.pipeline.CSV_COLUMNS``). config: the resolved
+    the per-frame CSV (``odometry.diagnostics.CSV_COLUMNS``). config: the resolved
     odometry config, YAML. tum: the trajectory in TUM format.
     """
 
@@ -132,7 +135,7 @@ def write_run_files(files: RunFiles, poses: np.ndarray, diagnostics: list | None
 
     write_kitti_poses(files.poses, poses)
     if files.diagnostics is not None and diagnostics is not None:
-        from odometry.pipeline import write_diagnostics_csv
+        from odometry.diagnostics import write_diagnostics_csv
 
         write_diagnostics_csv(files.diagnostics, diagnostics)
     if files.config is not None and config is not None:
@@ -164,55 +167,62 @@ def evaluate_against_truth(sequence, poses: np.ndarray, frame_indices: np.ndarra
     return evaluate_trajectory(gt, poses)
 
 
+def segment_errors_per_100m(T_gt: np.ndarray, T_est: np.ndarray, length_m: float, step_frames: int) -> np.ndarray:
+    """(M,) translational error of each ``length_m`` segment (KITTI protocol, starts every ``step_frames``),
+    m per 100 m of path: the SALO paper's figure. T_gt, T_est: (N, 4, 4)."""
+    from odometry.metrics import kitti_segment_errors
+
+    s = kitti_segment_errors(T_gt, T_est, [length_m], step_frames)
+    return s.t_err_ratio * 100.0
+
+
 @dataclass
 class MethodRun:
-    """One odometry run over a sequence and what came of it.
+    """A method's run over a sequence: the one result of every method (ours, the peers, commands, plug-ins).
 
-    run: ``odometry.pipeline.OdometryRun`` (poses (N, 4, 4) ``T_first_lidar``, frame
-    indices, times, per-frame diagnostics, config, seconds). flags: ``FrameFlags``.
-    metrics: ``odometry.metrics.TrajectoryMetrics`` against the ground truth, or None
-    (not asked, or none known). files: what was written, or None. run_s: wall time of
-    the run and its files, s; evaluate_s: of the evaluation, s.
+    method: the method's name (``tools.methods.Method.name``). poses: (N, 4, 4) lidar poses at
+    each sweep start in the first one's frame, the first the identity, NaN from a divergence
+    on; None when the method gave none (``error`` says why). seconds: wall time of the method,
+    s (ours and the peers: the frame loop, reading the frames included). note: one line about
+    the run (our configuration's name, a peer's version). error: why the run has no usable
+    poses (not installed, failed, diverged), or None. settings: what ran, JSON-able (our
+    config; a peer's settings, version and input: ``frames_with_times``, ``diverged_at_frame``).
+    degenerate: (N,) bool, the frames the method itself flagged as weakly constrained, or None
+    when it does not say. diagnostics: our odometry's ``FrameDiagnostics`` per frame, or None.
+    odometry_run: ours: the odometry library's own result (``odometry.pipeline.OdometryRun``:
+    frame indices, times, config), else None. method_poses (N, 4, 4), instants (N,): a peer's
+    poses as it returned them and the instant each belongs to, sweep periods after its sweep's
+    start (``tools.peers``), else None. flags: ``FrameFlags``, counted from ``diagnostics`` when
+    not given. frames_per_second: frames registered (finite poses) per second of ``seconds``,
+    worked out when not given (a run read back from a results file keeps its own figure).
     """
 
-    run: object
-    flags: FrameFlags
-    metrics: object | None
-    files: RunFiles | None
-    run_s: float
-    evaluate_s: float = 0.0
+    method: str
+    poses: np.ndarray | None
+    seconds: float = float("nan")
+    note: str = ""
+    error: str | None = None
+    settings: dict = field(default_factory=dict)
+    degenerate: np.ndarray | None = None
+    diagnostics: list | None = None
+    odometry_run: object | None = None
+    method_poses: np.ndarray | None = None
+    instants: np.ndarray | None = None
+    flags: FrameFlags | None = None
+    frames_per_second: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.flags is None and self.diagnostics is not None:
+            self.flags = FrameFlags.of(self.diagnostics)
+        if self.frames_per_second is None:
+            done = 0 if self.poses is None else int(np.sum(np.all(np.isfinite(self.poses), axis=(1, 2))))
+            self.frames_per_second = done / self.seconds if self.seconds > 0 else float("nan")
 
     @property
-    def poses(self) -> np.ndarray:
-        return self.run.poses
-
-    @property
-    def frames_per_second(self) -> float:
-        return self.run.frames_per_second
-
-
-def run_method(sequence, config, *, frames: slice | None = None, on_frame=None, files: RunFiles | None = None,
-               evaluate: bool = False) -> MethodRun:
-    """Run our odometry with ``config`` over (a slice of) ``sequence``, write ``files``, count flags, evaluate.
-
-    on_frame(k, diagnostics) after each frame. evaluate: figures against the
-    sequence's ground truth (``evaluate_against_truth``). Raises
-    ``odometry.pipeline.OdometryError`` when the odometry cannot run on the input.
-    """
-    from odometry.pipeline import run_sequence
-
-    t0 = time.perf_counter()
-    run = run_sequence(sequence, config, frames=frames, on_frame=on_frame)
-    if files is not None:
-        write_run_files(files, run.poses, run.diagnostics, config, run.times_s, sequence.sensor)
-    run_s = time.perf_counter() - t0
-    result = MethodRun(run, FrameFlags.of(run.diagnostics), None, files, run_s)
-    if evaluate:
-        t0 = time.perf_counter()
-        result.metrics = evaluate_against_truth(sequence, run.poses, None if frames is None else run.frame_indices)
-        result.evaluate_s = time.perf_counter() - t0
-    return result
+    def ok(self) -> bool:
+        """True when the method gave poses and nothing is wrong with them."""
+        return self.error is None and self.poses is not None
 
 
 __all__ = ["FrameFlags", "MethodRun", "PathTooShort", "RunFiles", "SimulatedSequence", "evaluate_against_truth",
-           "run_method", "simulate_scene", "write_run_files"]
+           "segment_errors_per_100m", "simulate_scene", "write_run_files"]

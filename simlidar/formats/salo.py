@@ -1,12 +1,13 @@
 """The simulator's sequence folder: the KITTI odometry layout plus per-point truth and a manifest.
 
-The layout (``kind == "salo"``), format version 2::
+The layout (``kind == "salo"``), format version 2 (3 when the truth carries optional blocks)::
 
     DIR/
       velodyne/000000.bin   float32 x y z intensity per point (KITTI odometry format)
       sidecar/000000.truth  the compact truth of every point of the .bin, same order: firing
                             index, true range, octahedral normal, object id, and the sensor's
-                            motion during the sweep (``simlidar.formats.truth``: 14 bytes a return)
+                            motion during the sweep (``simlidar.formats.truth``: 14 bytes a return);
+                            in weather (version 3) also each return's kind: surface, fog, rain, snow
       poses.txt             3x4 row-major T_first_lidar per frame (line 0 is identity)
       times.txt             sweep start time per frame, s (first is 0)
       sensor.yaml           the sensor model (simlidar.sensor keys)
@@ -18,9 +19,12 @@ The layout (``kind == "salo"``), format version 2::
 
 Format version 1 (sequences written before) had ``sidecar/000000.npy`` instead: a
 structured array of 50 bytes a return (``simlidar.formats.truth.SIDECAR_DTYPE``).
-``open_salo`` reads both, told apart by the manifest's ``format_version``; either
+``open_salo`` reads all three, told apart by the manifest's ``format_version``; either
 way a frame's ``fields`` are that version-1 record, rebuilt from the compact truth
-for version 2 (within the bounds ``simlidar.formats.truth`` states).
+for versions 2 and 3 (within the bounds ``simlidar.formats.truth`` states), with the
+field ``weather`` when the truth has the weather block. Version 3 is written only
+when some frame's truth has an optional block (a sensor with weather); without,
+the folder is version 2, byte for byte as before.
 
 ``SequenceWriter`` builds it in a ``simlidar.formats.atomic.StagedFolder`` (a
 hidden sibling holding an ``INCOMPLETE`` marker, renamed into place only when
@@ -52,8 +56,10 @@ from .scan_folders import Sequence, check_bin_sizes
 
 FORMAT_NAME = "salo-sequence"
 FORMAT_VERSION = 2
-FORMAT_VERSIONS = (1, 2)  # what the reader reads
-SIDECAR_SUFFIX = {1: ".npy", 2: ".truth"}
+FORMAT_VERSIONS = (1, 2, 3)  # what the reader reads
+# Written instead of 2 when some frame's truth has an optional block (``simlidar.formats.truth``).
+FORMAT_VERSION_BLOCKS = 3
+SIDECAR_SUFFIX = {1: ".npy", 2: ".truth", 3: ".truth"}
 SIDECAR_FIELDS = (
     "ring",
     "azimuth_index",
@@ -103,6 +109,7 @@ class SequenceWriter:
         self._checksums: dict[str, str] = {}
         self._degeneracy_rows: dict[int, str] = {}
         self._points = 0
+        self._blocks = False  # some frame's truth has an optional block: the folder is version 3
         self._bytes = {"velodyne": 0, "sidecar": 0}
         self._queue: queue.Queue = queue.Queue(maxsize=max(1, queue_frames))
         self._thread: threading.Thread | None = None
@@ -176,13 +183,16 @@ class SequenceWriter:
         else:
             knots = None if scan.motion is None else truth.motion_knots(scan.motion)
             ray = np.asarray(scan.azimuth_index, dtype=np.int64) * self.sensor.rings + scan.ring
+            weather = getattr(scan, "weather", None)
             car = truth.encode(ray, scan.true_range_m, scan.normal, scan.object_id, knots, self.id_bytes,
-                               compress=self.compress_truth)
+                               compress=self.compress_truth, weather=weather)
+            self._blocks |= weather is not None
         for rel, data in ((f"velodyne/{name}.bin", memoryview(points).cast("B")),
                           (f"sidecar/{name}{SIDECAR_SUFFIX[self.format_version]}", car)):
             self._checksums[rel] = write_checksummed(self.tmp / rel, data)
             self._bytes[rel.split("/")[0]] += len(data)
-        self._degeneracy_rows[k] = csv_row(k, degeneracy(scan.true_xyz, scan.normal))
+        surface = getattr(scan, "surface_returns", slice(None))  # the world's figures: returns off a surface
+        self._degeneracy_rows[k] = csv_row(k, degeneracy(scan.true_xyz[surface], scan.normal[surface]))
 
     def _commit(self) -> None:
         if not self._poses:
@@ -209,7 +219,7 @@ class SequenceWriter:
             self._checksums[fname] = sha256_file(self.tmp / fname)
         manifest = {
             "format": FORMAT_NAME,
-            "format_version": self.format_version,
+            "format_version": FORMAT_VERSION_BLOCKS if self._blocks else self.format_version,
             "package_version": __version__,
             "frames": len(self._poses),
             "points": self._points,
@@ -258,7 +268,7 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
         )
     own = load_sensor_file(path / "sensor.yaml")  # the firing table the truth was written with
     reader = None
-    if version == 2:
+    if version in (2, 3):
         def reader(car: Path, xyz: np.ndarray) -> np.ndarray:
             try:
                 data = car.read_bytes()
@@ -278,5 +288,5 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
                     imu_truth=imu_truth)
 
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FORMAT_VERSIONS", "SIDECAR_FIELDS", "SequenceWriter", "is_salo",
-           "open_salo"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FORMAT_VERSIONS", "FORMAT_VERSION_BLOCKS", "SIDECAR_FIELDS",
+           "SequenceWriter", "is_salo", "open_salo"]

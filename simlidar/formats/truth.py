@@ -1,10 +1,11 @@
-"""The compact per-return truth of a simulated sequence (sequence format version 2).
+"""The compact per-return truth of a simulated sequence (sequence format versions 2 and 3).
 
 One file per frame, ``sidecar/NNNNNN.truth``, beside the frame's KITTI ``.bin``
 (whose points it describes, in the same order). Little-endian throughout::
 
     header   32 bytes: magic b"SALOTRU2", u4 returns N, u4 knots K, u1 object-id bytes W (1, 2 or 4),
-             u1 compression (0: none, 1: zlib, the rest of the file one zlib stream), 14 bytes zero
+             u1 compression (0: none, 1: zlib, the rest of the file one zlib stream), u1 blocks B
+             (version 3; 0 in version 2: a bit per optional block after the object ids), 13 bytes zero
     knots    K x 6 float32: the sensor's motion during the sweep, knot c at the start of firing
              column c (c = 0..K-1, K = columns + 1; K = 0 without motion distortion): rotation
              vector (rad) and translation (m) of T_start_fire, the sensor pose at that instant in
@@ -15,6 +16,20 @@ One file per frame, ``sidecar/NNNNNN.truth``, beside the frame's KITTI ``.bin``
     normal   N x 2 int16: the true surface normal in the sweep-start frame, facing the sensor,
              octahedral encoding scaled by 32767
     object   N x uW: the object hit; W is the fewest bytes that hold the world's object count
+    weather  (block bit 0, ``BLOCK_WEATHER``) N x u1: what each return is, ``simlidar.weather.KINDS``
+             (0 a surface, 1 fog, 2 rain, 3 snow)
+
+Optional blocks (format version 3). A block is a set of per-return fields of
+its own, present when its bit of the header's byte B is set, stored after the
+object ids in the order of the bits; a reader refuses a file with a bit it does
+not know. A file without blocks is a version-2 file byte for byte, and the
+sequence's manifest says ``format_version`` 3 only when some frame has a block
+(so readers of version 2 refuse it with a clear message). The weather block
+(bit 0): for a weather return, the record's truth (range, normal, object) is
+the surface its beam reached, if any; a beam that reached none stores range
+NaN (normal and object written as 0), decoded as true_xyz and normal NaN and
+object_id -1. The decoded record then has the field ``weather``
+(``sidecar_dtype(weather=True)``).
 
 that is 14 bytes a return (16 for worlds of more than 65,536 objects) plus 24
 bytes a column for the motion (salo32 in a city: 0.8 bytes a return), against
@@ -60,7 +75,7 @@ MAGIC = b"SALOTRU2"
 HEADER_BYTES = 32
 KNOT_FLOATS = 6
 OCT_SCALE = 32767.0
-# Bounds the format guarantees (README "A sequence folder"; checked by the round-trip test).
+# Bounds the format guarantees (docs/sequence-format.md; checked by the round-trip test).
 TRUE_XYZ_REL_BOUND = 4e-7  # x true range
 TRUE_XYZ_ABS_BOUND_M = 1e-6
 NORMAL_BOUND_DEG = 0.01
@@ -78,6 +93,16 @@ SIDECAR_DTYPE = np.dtype(
         ("object_id", "<i4"),
     ]
 )
+# Optional blocks: the header's byte 18, a bit each.
+BLOCKS_BYTE = 18
+BLOCK_WEATHER = 1
+KNOWN_BLOCKS = BLOCK_WEATHER
+WEATHER_DTYPE = np.dtype(SIDECAR_DTYPE.descr + [("weather", "u1")])
+
+
+def sidecar_dtype(weather: bool = False) -> np.dtype:
+    """The decoded per-point record: ``SIDECAR_DTYPE``, with the ``weather`` field (u1) when the truth has one."""
+    return WEATHER_DTYPE if weather else SIDECAR_DTYPE
 
 
 def object_id_bytes(n_objects: int) -> int:
@@ -159,17 +184,24 @@ def motion_knots(T_start_fire: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------- encode / decode
 def encode(ray: np.ndarray, true_range_m: np.ndarray, normal: np.ndarray, object_id: np.ndarray,
-           knots: np.ndarray | None, id_bytes: int, compress: bool = False) -> bytes:
+           knots: np.ndarray | None, id_bytes: int, compress: bool = False, weather: np.ndarray | None = None) -> bytes:
     """One frame's truth file as bytes (see the module doc).
 
     ray: (N,) firing index. true_range_m: (N,) m. normal: (N, 3) unit, sweep-start frame, or
     (N, 2) int16 octahedral codes already. object_id: (N,) >= 0. knots: (K, 6) float32 or None.
-    id_bytes: 1, 2 or 4. compress: zlib (level 1) the part after the header.
+    id_bytes: 1, 2 or 4. compress: zlib (level 1) the part after the header. weather: (N,) uint8
+    kinds (the weather block), or None; its returns without a surface (true range NaN) may carry
+    any normal and object id (NaN, -1): 0 is written.
     """
     n = len(ray)
     knots = np.zeros((0, KNOT_FLOATS), "<f4") if knots is None else np.ascontiguousarray(knots, "<f4")
-    codes = normal if normal.dtype == np.int16 else octahedral_encode(normal)
     ids = np.asarray(object_id)
+    if weather is not None:
+        bare = np.isnan(np.asarray(true_range_m, dtype=np.float64))
+        if bare.any():
+            normal, ids = np.array(normal, copy=True), np.array(ids, copy=True)
+            normal[bare], ids[bare] = 0, 0
+    codes = normal if normal.dtype == np.int16 else octahedral_encode(normal)
     if n and (ids.min() < 0 or ids.max() >= 1 << (8 * id_bytes)):
         raise ValueError(f"object ids {ids.min()}..{ids.max()} do not fit in {id_bytes} bytes")
     header = np.zeros(HEADER_BYTES, np.uint8)
@@ -177,14 +209,20 @@ def encode(ray: np.ndarray, true_range_m: np.ndarray, normal: np.ndarray, object
     header[8:16] = np.frombuffer(np.array([n, len(knots)], "<u4").tobytes(), np.uint8)
     header[16] = id_bytes
     header[17] = 1 if compress else 0
-    body = b"".join((knots.tobytes(), np.asarray(ray, "<u4").tobytes(), np.asarray(true_range_m, "<f4").tobytes(),
-                     np.ascontiguousarray(codes, "<i2").tobytes(), ids.astype(f"<u{id_bytes}").tobytes()))
+    parts = [knots.tobytes(), np.asarray(ray, "<u4").tobytes(), np.asarray(true_range_m, "<f4").tobytes(),
+             np.ascontiguousarray(codes, "<i2").tobytes(), ids.astype(f"<u{id_bytes}").tobytes()]
+    if weather is not None:
+        if len(weather) != n:
+            raise ValueError(f"{len(weather)} weather kinds for {n} returns")
+        header[BLOCKS_BYTE] |= BLOCK_WEATHER
+        parts.append(np.asarray(weather, "u1").tobytes())
+    body = b"".join(parts)
     return header.tobytes() + (zlib.compress(body, 1) if compress else body)
 
 
 def read_header(data: bytes, where) -> tuple[int, int, int, bytes]:
-    """(returns, knots, id bytes, body) of a truth file's bytes, the body decompressed; DatasetError naming
-    ``where`` if malformed."""
+    """(returns, knots, id bytes, body) of a truth file's bytes, the body decompressed (with the optional
+    blocks the header's byte ``BLOCKS_BYTE`` flags); DatasetError naming ``where`` if malformed."""
     if len(data) < HEADER_BYTES or data[:8] != MAGIC:
         raise DatasetError(f"{where}: not a truth file (no {MAGIC.decode()} header)")
     n, k = (int(v) for v in np.frombuffer(data[8:16], "<u4"))
@@ -193,13 +231,17 @@ def read_header(data: bytes, where) -> tuple[int, int, int, bytes]:
         raise DatasetError(f"{where}: object-id width {width} bytes (1, 2 or 4 expected)")
     if compression not in (0, 1):
         raise DatasetError(f"{where}: unknown compression {compression} (0 or 1 expected)")
+    blocks = data[BLOCKS_BYTE]
+    if blocks & ~KNOWN_BLOCKS:
+        raise DatasetError(f"{where}: optional truth blocks 0x{blocks & ~KNOWN_BLOCKS:02x} this version does not "
+                           "read (written by a newer salo-bench?)")
     body = data[HEADER_BYTES:]
     if compression == 1:
         try:
             body = zlib.decompress(body)
         except zlib.error as exc:
             raise DatasetError(f"{where}: damaged compressed truth ({exc})") from None
-    expected = k * KNOT_FLOATS * 4 + n * (4 + 4 + 4 + width)
+    expected = k * KNOT_FLOATS * 4 + n * (4 + 4 + 4 + width + (1 if blocks & BLOCK_WEATHER else 0))
     if len(body) != expected:
         raise DatasetError(f"{where}: {len(body) + HEADER_BYTES:,} bytes, the header's {n:,} returns and {k} knots "
                            f"need {expected + HEADER_BYTES:,} (truncated or damaged)")
@@ -207,11 +249,13 @@ def read_header(data: bytes, where) -> tuple[int, int, int, bytes]:
 
 
 def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file") -> np.ndarray:
-    """A truth file's bytes and its frame's (N, 3) ``.bin`` points -> (N,) ``SIDECAR_DTYPE`` records.
+    """A truth file's bytes and its frame's (N, 3) ``.bin`` points -> (N,) ``sidecar_dtype`` records (with the
+    ``weather`` field when the file has the weather block).
 
     sensor: the sequence's own ``LidarModel`` (its rings and firing table). Raises DatasetError
     naming ``where`` when the file is malformed or does not match the points.
     """
+    blocks = data[BLOCKS_BYTE] if len(data) > BLOCKS_BYTE else 0
     n, k, width, data = read_header(data, where)
     if n != len(xyz):
         raise DatasetError(f"{where}: {n} returns but the scan has {len(xyz)} points")
@@ -225,13 +269,15 @@ def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file") -> np.ndarr
     codes = np.frombuffer(data, "<i2", 2 * n, off).reshape(n, 2)
     off += 4 * n
     obj = np.frombuffer(data, f"<u{width}", n, off)
+    off += width * n
+    weather = np.frombuffer(data, "u1", n, off) if blocks & BLOCK_WEATHER else None
 
     rings = sensor.rings
     ring, col = ray % rings, ray // rings
     if n and col.max() >= sensor.columns_per_sweep:
         raise DatasetError(f"{where}: firing index {int(ray.max())} beyond the sensor's "
                            f"{sensor.rays_per_sweep} rays per sweep")
-    out = np.empty(n, SIDECAR_DTYPE)
+    out = np.empty(n, sidecar_dtype(weather is not None))
     out["ring"], out["azimuth_index"] = ring, col
     out["time_s"] = sensor.firing_time_s(ring, col)
     xyz64 = np.asarray(xyz, dtype=np.float64)
@@ -253,9 +299,14 @@ def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file") -> np.ndarr
     out["true_xyz"] = p
     out["normal"] = octahedral_decode(codes)
     out["object_id"] = obj
+    if weather is not None:
+        out["weather"] = weather
+        bare = np.isnan(true_range)
+        out["normal"][bare] = np.nan
+        out["object_id"][bare] = -1
     return out
 
 
-__all__ = ["HEADER_BYTES", "MAGIC", "NORMAL_BOUND_DEG", "SIDECAR_DTYPE", "TRUE_XYZ_ABS_BOUND_M", "TRUE_XYZ_REL_BOUND",
-           "decode", "encode", "motion_knots", "object_id_bytes", "octahedral_decode", "octahedral_encode",
-           "read_header", "rotate", "rotvec_of"]
+__all__ = ["BLOCK_WEATHER", "HEADER_BYTES", "MAGIC", "NORMAL_BOUND_DEG", "SIDECAR_DTYPE", "TRUE_XYZ_ABS_BOUND_M",
+           "TRUE_XYZ_REL_BOUND", "WEATHER_DTYPE", "decode", "encode", "motion_knots", "object_id_bytes",
+           "octahedral_decode", "octahedral_encode", "read_header", "rotate", "rotvec_of", "sidecar_dtype"]

@@ -59,7 +59,7 @@ def _common(p, name: str) -> None:
     p.add_argument("--quick", action="store_true", help="a small, fast run (minutes -> seconds): for trying it out")
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an odometry parameter for every method (repeatable), a dotted key: e.g. "
-                   "match.target=raw (salo odometry --keys lists them)")
+                   "match.target=map (salo odometry --keys lists them)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
 
 
@@ -192,7 +192,7 @@ def _config_overrides(pairs: list[str]) -> dict:
 
 
 def _specs(text: str | None, default: list, args, quick_frames: int, start_default: float = 0.0) -> tuple:
-    from tools.experiments.suite import parse_spec
+    from tools.sequence_cache import parse_spec
 
     frames = args.frames or (quick_frames if args.quick else None)
     start = args.start if args.start is not None else (10.0 if args.quick else start_default)
@@ -215,8 +215,6 @@ def _finish(record, out: Path) -> None:
 
 # ---------------------------------------------------------------- commands
 def cmd_table(args) -> int:
-    from tools.experiments.records import RunRecord
-    from tools.experiments.suite import table_suite
     from tools.experiments.table import (
         METHOD_LABELS,
         PEER_METHODS,
@@ -226,6 +224,8 @@ def cmd_table(args) -> int:
         table_rows,
         write_table,
     )
+    from tools.records import RunRecord
+    from tools.sequence_cache import table_suite
 
     default = table_suite()
     if args.quick and not args.sequences:
@@ -275,7 +275,6 @@ def _parse_levels(text: str) -> tuple:
 
 
 def cmd_rejectors(args) -> int:
-    from tools.experiments.records import RunRecord
     from tools.experiments.rejector_study import (
         DEFAULT_LEVELS,
         TARGETS,
@@ -283,7 +282,8 @@ def cmd_rejectors(args) -> int:
         run_rejector_study,
         write_rejector_study,
     )
-    from tools.experiments.suite import table_suite
+    from tools.records import RunRecord
+    from tools.sequence_cache import table_suite
 
     default = [s for s in table_suite() if s.scene == "city"]
     if args.quick and not args.sequences:
@@ -319,8 +319,8 @@ def cmd_rejectors(args) -> int:
 
 def cmd_ncf(args) -> int:
     from tools.experiments.ncf_study import DEFAULT_NOISE_LEVELS_M, NcfStudyParams, run_ncf_study, write_ncf_study
-    from tools.experiments.records import RunRecord
-    from tools.experiments.suite import SequenceSpec
+    from tools.records import RunRecord
+    from tools.sequence_cache import SequenceSpec
 
     try:
         if args.scans:
@@ -373,7 +373,7 @@ def cmd_generalize(args) -> int:
         run_generalize,
         write_generalize,
     )
-    from tools.experiments.records import RunRecord
+    from tools.records import RunRecord
 
     try:
         seeds = tuple(int(s) for s in _csv(args.seeds))

@@ -60,6 +60,10 @@ def add_commands(sub) -> None:
                    help="seed of the noise, and of a --scene (default 0, or the scene parameters' seed)")
     p.add_argument("--noise-std", type=real_number(0.0),
                    help="range noise standard deviation, m (overrides the sensor)")
+    p.add_argument("--sensor-set", action="append", default=[], metavar="KEY=VALUE",
+                   help="change a key of the sensor (repeatable; `salo sensors --keys`), sections' keys dotted: "
+                   "--sensor-set receiver.enabled=true --sensor-set weather.fog.enabled=true "
+                   "--sensor-set weather.fog.mor_m=60 (docs/weather.md)")
     p.add_argument(
         "--no-motion-distortion",
         dest="motion_distortion",
@@ -77,11 +81,21 @@ def add_commands(sub) -> None:
 
 
 def _sensor_from_args(args):
+    from paramspec import ParamError, assignments, build, schema
+    from simlidar.sensor import LidarModel, SensorError
+
     sensor = load_sensor(args.sensor)
     if getattr(args, "noise_std", None) is not None:
         sensor = sensor.with_overrides(range_noise_std_m=args.noise_std)
     if getattr(args, "imu", False):
         sensor = sensor.with_overrides(imu=dataclasses.replace(sensor.imu, enabled=True))
+    if getattr(args, "sensor_set", None):
+        try:
+            values = schema(LidarModel).read(assignments(args.sensor_set, "--sensor-set"), "--sensor-set",
+                                             coerce=True, partial=True, error=SensorError)
+            sensor = build(LidarModel, values, sensor, "--sensor-set")
+        except ParamError as exc:
+            raise CommandError(str(exc)) from None
     return sensor
 
 

@@ -1,30 +1,20 @@
 """Generalisation: odometry on worlds, sensors and data kinds its defaults were not chosen on.
 
-The suite. Scene *families* (``scenes.families``: city, suburb, canyon, tunnel,
-highway, open, forest), each drawn with randomised parameters from a seed; the
-sensors vlp16, hdl32e, salo32, os1-64 and narrow32 rotate over the families and
-seeds (every family and every sensor appear, not every combination); the range
-noise is drawn per sequence between 1 and 3 cm, and the start along the path
-between a standing start and 12 s in (so many sequences start at speed). Every
-(family, seed) is run in two kinds:
-
-- "simulated": motion distortion on, per-point ring and time given to the methods;
-- "real": no motion distortion and no per-point fields (x, y, z only), as real
-  KITTI scans: rings from the elevation, nothing to de-skew with.
-
-Seeds are split in the code: parameters are chosen on ``TUNING_SEEDS`` and
-the figures reported are those of ``EVALUATION_SEEDS``; the two never overlap.
+The suite is ``tools.family_suite``'s: scene families x sensors x the two data
+kinds ("simulated" with per-point ring and time, "real" with x, y, z only), the
+seeds split into tuning and evaluation.
 
 Per sequence every method runs on the same in-memory frames
-(``simlidar.in_memory``), in one worker process: our variants (the default
-configuration of ``salo odometry``, the paper's scan-to-scan BL / NCF / SALO,
-their scan-to-map twins) and the peers (``tools.experiments.peer``: KISS-ICP,
+(``simlidar.in_memory``), in one worker process, through the one interface
+(``tools.methods.run_method``: the sensor's view, no truth): our variants (the
+default configuration of ``salo odometry``, the paper's scan-to-scan BL / NCF /
+SALO, their scan-to-map twins) and the peers (``tools.peers``: KISS-ICP,
 GenZ-ICP, a small_gicp scan-to-map pipeline) when installed. Figures per
-method: KITTI t_err (%) and r_err (deg/100 m) over segments of
-``SEGMENT_LENGTHS_M`` (the sequences are 100-500 m long, shorter than KITTI's
-800 m), the vertical drift (end-point height error over the distance
-travelled, %), failure (t_err > 10 %), frames/s. Per family and kind: mean and
-spread (standard deviation over the sequences) of each.
+method (``family_suite.trajectory_figures``): KITTI t_err (%) and r_err
+(deg/100 m) over segments of ``SEGMENT_LENGTHS_M`` (the sequences are 100-500 m
+long, shorter than KITTI's 800 m), the vertical drift (end-point height error
+over the distance travelled, %), failure (t_err > 10 %), frames/s. Per family
+and kind: mean and spread (standard deviation over the sequences) of each.
 """
 
 from __future__ import annotations
@@ -32,126 +22,30 @@ from __future__ import annotations
 import logging
 import math
 import time
-import zlib
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from paramspec import value_text
-
-from .records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.family_suite import (
+    DEFAULT_FRAMES,
+    FAILURE_T_ERR_PCT,
+    KINDS,
+    SEGMENT_LENGTHS_M,
+    SPLITS,
+    SuiteSequence,
+    simulate,
+    suite,
+    trajectory_figures,
+)
+from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.runners import MethodRun
 
 log = logging.getLogger(__name__)
-
-SENSORS = ("vlp16", "hdl32e", "salo32", "os1-64", "narrow32")
-KINDS = ("simulated", "real")
-TUNING_SEEDS = (101, 102, 103)
-EVALUATION_SEEDS = (1, 2)
-SPLITS = {"tuning": TUNING_SEEDS, "evaluation": EVALUATION_SEEDS}
-DEFAULT_FRAMES = 200
-SEGMENT_LENGTHS_M = (50.0, 100.0, 150.0, 200.0)
-FAILURE_T_ERR_PCT = 10.0
-MAX_START_S = 12.0
-# Families with a tunnel start where the portal comes at this fraction of the sequence
-# (the canyon's street then its tunnel; mostly inside for the tunnel), whatever the start drawn.
-PORTAL_AT_FRACTION = {"canyon": 0.5, "tunnel": 0.2}
-NOISE_RANGE_M = (0.01, 0.03)
 
 OUR_METHODS = ("default", "bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
 PEER_METHODS = ("kiss-icp", "genz-icp", "small-gicp")
 DEFAULT_METHODS = ("default", "bl", "ncf", "salo", *PEER_METHODS)
-
-
-@dataclass(frozen=True)
-class SuiteSequence:
-    """One sequence of the suite: a family drawn with a seed, a sensor, a kind of data.
-
-    noise_std_m: range noise (1 sigma), m. start_s: time along the path of the first sweep, s
-    (families in ``PORTAL_AT_FRACTION``: None, the start is placed by the portal).
-    """
-
-    family: str
-    seed: int
-    sensor: str
-    kind: str
-    frames: int
-    noise_std_m: float
-    start_s: float | None
-
-    @property
-    def name(self) -> str:
-        return f"{self.family}-{self.seed}-{self.sensor}-{self.kind}"
-
-
-def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
-          kinds: tuple[str, ...] = KINDS) -> list[SuiteSequence]:
-    """The suite's sequences for ``seeds``: every family x seed x kind, the sensor rotating.
-
-    The sensor of the i-th (family, seed) pair is ``SENSORS[i % 5]`` shifted by the
-    first seed, so a split of two seeds over seven families uses every sensor at
-    least twice. Noise and start are drawn from the (family, seed) pair.
-    """
-    from scenes.families import FAMILIES
-
-    families = tuple(families or FAMILIES)
-    unknown = [f for f in families if f not in FAMILIES]
-    if unknown:
-        raise ValueError(f"unknown family {unknown[0]!r} (known: {', '.join(FAMILIES)})")
-    out = []
-    for family in families:
-        # the family's place in the whole suite, so that a subset of families draws the same sequences
-        fi = list(FAMILIES).index(family)
-        for si, seed in enumerate(seeds):
-            rng = np.random.default_rng([zlib.crc32(family.encode()), int(seed), 0x6E4])
-            sensor = SENSORS[(fi * len(seeds) + si + seeds[0]) % len(SENSORS)]
-            noise = round(float(rng.uniform(*NOISE_RANGE_M)), 4)
-            start = round(float(rng.choice([0.0, rng.uniform(2.0, MAX_START_S)])), 2)
-            if family in PORTAL_AT_FRACTION:
-                start = None
-            out.extend(SuiteSequence(family, int(seed), sensor, kind, frames, noise, start) for kind in kinds)
-    return out
-
-
-def _prepare(seq: SuiteSequence):
-    """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
-    from scenes import build_scene
-    from scenes.families import draw_family_params, family_scene
-    from simlidar.sensor import load_sensor
-    from tools.worlds import world_of_scene
-
-    scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
-    world = world_of_scene(scene)
-    sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
-    span = seq.frames * sensor.sweep_period_s
-    start = seq.start_s
-    if start is None:
-        portal = float(scene.trajectory.time_at_distance(scene.metadata["interior_s"][0])[0])
-        start = float(np.clip(portal - PORTAL_AT_FRACTION[seq.family] * span, 0.0, scene.trajectory.duration_s - span))
-    available = int((scene.trajectory.duration_s - start) / sensor.sweep_period_s)
-    if seq.frames > available:
-        raise ValueError(f"{seq.name}: the path has room for {available} sweeps after {start:.1f} s, "
-                         f"not {seq.frames}")
-    return world, scene.trajectory, sensor, start
-
-
-def simulate(seq: SuiteSequence, progress=None):
-    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
-    from simlidar.in_memory import simulate_in_memory
-
-    world, trajectory, sensor, start = _prepare(seq)
-    return simulate_in_memory(world, trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
-                              fields=seq.kind, name=seq.name, on_frame=progress)
-
-
-def simulate_to_folder(seq: SuiteSequence, out, force: bool = False):
-    """A suite sequence as a sequence folder (``simlidar.simulate.simulate_sequence``): the "real" kind
-    without motion distortion (its per-point fields are the staging's to leave out). Returns the path."""
-    from simlidar.simulate import simulate_sequence
-
-    world, trajectory, sensor, start = _prepare(seq)
-    return simulate_sequence(world, trajectory, sensor, out, frames=seq.frames, seed=seq.seed, t_start=start,
-                             motion_distortion=seq.kind == "simulated", force=force,
-                             info={"command": "bench", "suite_sequence": asdict(seq)})
 
 
 # ---------------------------------------------------------------- methods
@@ -162,63 +56,15 @@ def odometry_config(method: str, overrides: dict):
     return our_config(method).replace(**overrides)
 
 
-@dataclass
-class MethodRun:
-    """One method on one sequence: poses (F, 4, 4) or why there are none, and its figures."""
-
-    method: str
-    ok: bool
-    note: str = ""
-    poses: np.ndarray | None = None
-    frames_per_second: float = float("nan")
-    metrics: dict = field(default_factory=dict)
-    flags: dict = field(default_factory=dict)
-
-
-def run_method(method: str, sequence, overrides: dict) -> MethodRun:
-    """Run ``method`` over every frame of ``sequence`` (``tools.methods``; a peer that is missing or fails:
-    ``ok=False``)."""
-    from tools.methods import OursMethod, method_from_name, run_method_staged
+def run_one(method: str, sequence, overrides: dict) -> MethodRun:
+    """Run ``method`` over every frame of ``sequence`` through ``tools.methods.run_method`` (the sensor's view:
+    no poses, no truth); a peer that is missing or fails gives a run without poses whose ``error`` says why."""
+    from tools.methods import OursMethod, method_from_name, run_method
 
     m = method_from_name(method)
     if isinstance(m, OursMethod):
         m = OursMethod(method, odometry_config(method, overrides))
-    why = m.unavailable()
-    if why:
-        return MethodRun(method, False, why)
-    try:
-        out = run_method_staged(m, sequence)  # the sensor's view: no poses, no truth
-    except Exception as exc:  # noqa: BLE001 - a peer failing must not end the suite; the row says why
-        if isinstance(m, OursMethod):
-            raise
-        log.warning("%s failed on %s: %s", method, sequence.path.name, exc)
-        return MethodRun(method, False, f"failed: {type(exc).__name__}: {exc}")
-    if not isinstance(m, OursMethod):
-        return MethodRun(method, True, out.note, out.poses, out.frames_per_second)
-    from tools.runners import FrameFlags
-
-    counts = FrameFlags.of(out.diagnostics)
-    flags = {"extrapolated": counts.extrapolated, "degenerate": counts.degenerate,
-             "remapped_frames": counts.remapped}
-    return MethodRun(method, True, out.note, out.poses, out.frames_per_second, flags=flags)
-
-
-def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
-    """t_err %, r_err deg/100 m (KITTI protocol over segments of ``lengths_m``), vertical drift %,
-    ATE (aligned, m), RPE per frame (cm, deg), path length (m)."""
-    from odometry.metrics import evaluate_trajectory, trajectory_distances
-
-    if not np.all(np.isfinite(est)):
-        return {"t_err_pct": float("inf"), "diverged": True}
-    m = evaluate_trajectory(gt, est, lengths_m=lengths_m)
-    dist = trajectory_distances(gt)
-    length = float(dist[-1])
-    return {
-        "t_err_pct": m.t_err_pct, "r_err_deg_per_100m": m.r_err_deg_per_100m,
-        "vertical_drift_pct": 100.0 * float(est[-1, 2, 3] - gt[-1, 2, 3]) / length if length > 0 else float("nan"),
-        "ate_aligned_m": m.ate_aligned_rmse_m, "rpe_t_cm": 100.0 * m.rpe.t_stats_m.mean,
-        "rpe_r_deg": m.rpe.r_stats_deg.mean, "path_length_m": length, "diverged": False,
-    }
+    return run_method(m, sequence, keep_failures=True)
 
 
 def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: dict,
@@ -237,8 +83,12 @@ def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: d
            "simulate_s": sim_s, "gt": gt,
            "t_eig0_median": float(np.median(t_eig0)), "t_eig0_min": float(np.min(t_eig0)), "methods": {}}
     for method in methods:
-        run = run_method(method, sequence, overrides)
-        res = {"ok": run.ok, "note": run.note, "frames_per_second": run.frames_per_second, "flags": run.flags}
+        run = run_one(method, sequence, overrides)
+        flags = {} if run.flags is None else {"extrapolated": run.flags.extrapolated,
+                                              "degenerate": run.flags.degenerate,
+                                              "remapped_frames": run.flags.remapped}
+        res = {"ok": run.ok, "note": run.error if run.error is not None else run.note,
+               "frames_per_second": run.frames_per_second, "flags": flags}
         if run.ok:
             res.update(trajectory_figures(gt, run.poses, lengths_m))
             res["failed"] = bool(res["diverged"] or res["t_err_pct"] > FAILURE_T_ERR_PCT)
@@ -246,7 +96,7 @@ def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: d
         out["methods"][method] = res
         log.info("%s %s: %s", seq.name, method,
                  f"t_err {res.get('t_err_pct', float('nan')):.3f} %, {run.frames_per_second:.1f} frames/s"
-                 if run.ok else run.note)
+                 if run.ok else res["note"])
     return out
 
 
@@ -405,6 +255,8 @@ def table_markdown(rows: list[dict], methods: tuple[str, ...], figure: str = "t_
 
 def write_generalize(results: list[dict], params: GeneralizeParams, record: RunRecord) -> list[dict]:
     """results.json, per-sequence and summary CSV, summary.md and the plots into the run folder."""
+    from tools.plotting import trajectory_grid
+
     from . import plots
 
     methods = params.methods
@@ -477,5 +329,5 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
         errs = {method_label(m): (x["t_err_pct"], 0.0) for m, x in r["methods"].items() if x.get("ok")}
         tracks.append((r["name"], r["gt"], est, errs))
     if tracks:
-        plots.trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=100.0)
+        trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=100.0)
     return rows

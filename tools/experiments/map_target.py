@@ -1,6 +1,6 @@
 """The rejector study's map target: earlier scans in the odometry's local map, and the truth of each map point.
 
-The map is built with the odometry's own code (``odometry.pipeline.new_local_map``
+The map is built with the odometry's own code (``odometry.targets.new_local_map``
 and ``map_points``, ``LocalMap.update``, ``LocalMap.target``): scans filtered as
 the odometry filters them for a map target, their voxel centroids inserted
 oldest first, each with the sensor position it was seen from, into 1 m voxels
@@ -72,7 +72,7 @@ def build_map_target(frames: Sequence[MapFrame], config, sensor) -> MapTarget:
             map NCF when ``ncf.applies_to`` is map or both).
         sensor: ``simlidar.sensor.LidarModel`` (the map's range noise).
     """
-    from odometry.pipeline import map_points, new_local_map
+    from odometry.targets import map_points, new_local_map
 
     if not frames:
         raise ValueError("a map target needs at least one earlier scan")

@@ -40,8 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence
+from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.sequence_cache import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence
 
 log = logging.getLogger(__name__)
 
@@ -127,7 +127,7 @@ def scan_samples(sequence, k: int, config, models, rng: np.random.Generator, max
     from odometry.kdtree import KDTree
     from odometry.ncf import IsotropicNoise, RangeNoise, normal_covariance
     from odometry.normals import angle_between_normals_rad, estimate_normals
-    from odometry.pipeline import clean_scan
+    from odometry.preparation import clean_scan
     from odometry.voxels import voxel_centroids
 
     from .rejector_study import true_motion

@@ -10,7 +10,8 @@ Protocol (as the paper's, on simulated data):
   odometry does (voxel grid, kNN normals, NCF, curvature: the ``salo``
   config). The source is the filtered scan; the target is either the filtered
   previous scan (``match.target: filtered``, Alg. 1) or the previous de-skewed
-  raw scan with normals estimated where matched (``match.target: raw``).
+  raw scan with normals estimated where matched (``odometry.targets.raw_scan_target``;
+  no registration's target, as it came out of this study).
 - Or the target is a local map (``match.target: map``, ``map_target``): the
   ``map_frames`` scans before the source, filtered as the odometry filters
   them for a map and inserted at their true poses into the odometry's
@@ -89,11 +90,11 @@ from pathlib import Path
 import numpy as np
 
 from simlidar import se3
+from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.sequence_cache import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 
 from .levels import bounded_recall, level_label
 from .map_target import MapFrame, build_map_target
-from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 from .truth import PointTruth, TruthCriteria, true_matches, truth_of_points, truth_of_rows
 
 log = logging.getLogger(__name__)
@@ -207,7 +208,7 @@ def prepare_scan(sequence, k: int, config, sensor) -> PreparedScan:
     from odometry.deskew import deskew
     from odometry.filters import filter_scan
     from odometry.kdtree import KDTree
-    from odometry.pipeline import clean_scan
+    from odometry.preparation import clean_scan
 
     frame = sequence[k]
     clean = clean_scan(frame.points, frame.time_s, frame.ring, config)
@@ -227,17 +228,18 @@ def make_source(scan: PreparedScan, config, sensor):
     For a map-target config the scan has no normals: the source then carries the odometry's
     recipe for its thresholds, which ``register`` fills from the map's normals at the first matches.
     """
-    from odometry.pipeline import make_source as odometry_source
+    from odometry.targets import make_source as odometry_source
 
     return odometry_source(scan.filtered, config, sensor, with_gcr=True)
 
 
 def make_target(scan: PreparedScan, kind: str, config):
-    """``odometry.icp.Target`` and its ``PointTruth``: the filtered scan, or the raw one (normals on demand),
-    built as the odometry builds them (``odometry.pipeline.scan_target``)."""
-    from odometry.pipeline import scan_target
+    """``odometry.icp.Target`` and its ``PointTruth``: the filtered scan, as the odometry builds it, or the raw
+    one (normals on demand; ``odometry.targets``)."""
+    from odometry.targets import filtered_scan_target, raw_scan_target
 
-    target = scan_target(scan.filtered, config.replace(match={"target": kind}))
+    target = (filtered_scan_target(scan.filtered) if kind == "filtered"
+              else raw_scan_target(scan.filtered, config.filter.normal_neighbours))
     return target, (scan.truth if kind == "filtered" else truth_of_rows(scan.sidecar, scan.raw_rows))
 
 
@@ -470,8 +472,7 @@ def run_rejector_study(params: RejectorStudyParams, cache_dir: str | Path | None
                 if kind in params.targets:
                     target, tgt_truth = make_target(tgt_scan, kind, scan_configs["gcr"])
                     cases.append(TargetCase(kind, source, src_scan.truth, target, tgt_truth, T_true, None,
-                                            {n: c.replace(match={"target": kind}) for n, c in scan_configs.items()},
-                                            np.ones(len(source.points), dtype=bool)))
+                                            scan_configs, np.ones(len(source.points), dtype=bool)))
         if "map" in params.targets:
             first = max(0, k - params.map_frames)
             for key in [key for key in prepared_map if key[0] != s_idx or key[1] < first]:

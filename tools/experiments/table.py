@@ -1,10 +1,11 @@
 """Table I on simulated data: relative positioning error per 100 m, BL / NCF / SALO and the peers.
 
-For every sequence of the suite (``tools.experiments.suite``) each method runs
-over the same frames: our odometry with the ``bl``, ``ncf`` and ``salo``
-configs (``odometry.pipeline.run_sequence``), and the peers KISS-ICP, GenZ-ICP
-and a small_gicp scan-to-map pipeline through their Python APIs when installed
-(``tools.experiments.peer``; a missing one gets a row saying so). The paper's figure is the
+For every sequence of the suite (``tools.sequence_cache``) each method runs
+over the same frames, through the one interface (``tools.methods.run_method``,
+handed the sensor's data only): our odometry with the ``bl``, ``ncf`` and
+``salo`` configs, and the peers KISS-ICP, GenZ-ICP and a small_gicp scan-to-map
+pipeline through their Python APIs when installed (``tools.peers``; a missing
+one gets a row saying so). The paper's figure is the
 translational error of every ``segment_length_m`` (100 m) segment of the KITTI
 protocol (first frames every 10th frame, ``odometry.metrics.kitti_segment_errors``)
 in metres per 100 m: mean mu and population standard deviation sigma per
@@ -30,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from paramspec import value_text
-
-from .peer import PEERS
-from .records import RunRecord, fmt, markdown_table, write_csv, write_json
-from .suite import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
+from tools.peers import PEERS
+from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
+from tools.runners import FrameFlags, MethodRun, segment_errors_per_100m
+from tools.sequence_cache import DEFAULT_CACHE_LIMIT_BYTES, SequenceSpec, load_sequence, table_suite
 
 log = logging.getLogger(__name__)
 
@@ -83,36 +84,9 @@ def odometry_config(method: str, overrides: dict):
     return variant(method).replace(**overrides)
 
 
-@dataclass
-class MethodResult:
-    """One method on one sequence: poses (N, 4, 4), per-segment errors (m per 100 m), metrics, flags."""
-
-    method: str
-    available: bool
-    note: str = ""
-    poses: np.ndarray | None = None
-    segment_errors_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    metrics: dict = field(default_factory=dict)
-    frames_per_second: float = float("nan")
-    flagged_degenerate: int | None = None
-    extrapolated: int | None = None
-    diagnostics: list | None = None  # odometry.pipeline.FrameDiagnostics per frame (our methods)
-
-    @property
-    def mean(self) -> float:
-        return float(np.mean(self.segment_errors_m)) if len(self.segment_errors_m) else float("nan")
-
-    @property
-    def std(self) -> float:
-        return float(np.std(self.segment_errors_m)) if len(self.segment_errors_m) else float("nan")
-
-
-def segment_errors_per_100m(T_gt: np.ndarray, T_est: np.ndarray, length_m: float, step_frames: int) -> np.ndarray:
-    """(M,) translational error of each ``length_m`` segment, m per 100 m of path."""
-    from odometry.metrics import kitti_segment_errors
-
-    s = kitti_segment_errors(T_gt, T_est, [length_m], step_frames)
-    return s.t_err_ratio * 100.0
+def mean_std(errors: np.ndarray) -> tuple[float, float]:
+    """Mean and population standard deviation of segment errors (m per 100 m); NaN, NaN when there are none."""
+    return (float(np.mean(errors)), float(np.std(errors))) if len(errors) else (float("nan"), float("nan"))
 
 
 def degeneracy_summary(sequence) -> dict:
@@ -142,67 +116,62 @@ def degeneracy_summary(sequence) -> dict:
     }
 
 
-def run_method(method: str, sequence, params: TableParams, progress: bool) -> MethodResult:
-    """One method over one sequence (a peer: a "not installed" result when it cannot run here)."""
-    from tqdm import tqdm
-
-    from tools.runners import run_method as run_ours
+def table_method(method: str, params: TableParams):
+    """The ``tools.methods.Method`` a table's method name stands for: ours with the table's overrides, or a
+    peer on the range limits of SALO's configuration with them."""
+    from tools.methods import OursMethod, PeerMethod
 
     overrides = dict(params.config_overrides)
+    if method in PEER_METHODS:
+        clean = odometry_config("salo", overrides).clean
+        return PeerMethod(method, clean.min_range_m, clean.max_range_m)
+    return OursMethod(method, odometry_config(method, overrides))
+
+
+def run_in_table(method: str, sequence, params: TableParams, progress: bool) -> MethodRun:
+    """One method over one sequence (``tools.methods.run_method``: the sensor's data only). A peer that cannot
+    run here or fails gives a run without poses whose ``error`` says why; the run's note is the table's:
+    a peer's distribution and version, nothing for ours."""
+    from tqdm import tqdm
+
+    from tools.methods import run_method
+
     desc = f"{METHOD_LABELS[method]} {sequence.path.name}"
     with tqdm(total=len(sequence), unit="frame", desc=desc, disable=not progress, dynamic_ncols=True) as bar:
-        if method in PEER_METHODS:
-            res = run_peer_method(method, sequence, odometry_config("salo", overrides), lambda k: bar.update(1))
-            if not res.available:
-                return res
-        else:
-            ours = run_ours(sequence, odometry_config(method, overrides), on_frame=lambda k, d: bar.update(1))
-            res = MethodResult(method, True, "", ours.poses, frames_per_second=ours.frames_per_second,
-                               flagged_degenerate=ours.flags.degenerate, extrapolated=ours.flags.extrapolated)
-            res.diagnostics = ours.run.diagnostics
-    return score_method(res, sequence, params)
+        run = run_method(table_method(method, params), sequence, on_frame=lambda k, d: bar.update(1),
+                         keep_failures=True)
+    run.note = f"{PEERS[method].distribution} {run.settings.get('version')}" if method in PEER_METHODS else ""
+    return run
 
 
-def run_peer_method(method: str, sequence, cfg, on_frame) -> MethodResult:
-    """A peer over one sequence with our range limits (``cfg``: our odometry config); its failure is a row."""
-    from .peer import PeerUnavailable, peer_unavailable_reason, run_peer
-
-    reason = peer_unavailable_reason(method)
-    if reason is not None:
-        return MethodResult(method, False, reason)
-    try:
-        run = run_peer(method, sequence, min_range_m=cfg.clean.min_range_m, max_range_m=cfg.clean.max_range_m,
-                       on_frame=on_frame)
-    except PeerUnavailable as exc:
-        return MethodResult(method, False, str(exc))
-    except Exception as exc:  # noqa: BLE001 - a peer failing must not end a long run; the row says why
-        log.warning("%s failed on %s: %s", METHOD_LABELS[method], sequence.path.name, exc)
-        return MethodResult(method, False, f"failed: {type(exc).__name__}: {exc}")
-    return MethodResult(method, True, f"{PEERS[method].distribution} {run.config.get('version')}", run.poses,
-                        frames_per_second=run.frames_per_second)
-
-
-def score_method(res: MethodResult, sequence, params: TableParams) -> MethodResult:
-    """Fill in a finished method's errors against the sequence's ground truth (or mark it diverged)."""
+def score_run(run: MethodRun, gt: np.ndarray, params: TableParams) -> tuple[np.ndarray, dict]:
+    """A finished run's per-segment errors (m per 100 m) and figures (``odometry.metrics``) against the ground
+    truth ``gt`` (N, 4, 4); none for a run without poses, and a diverged run is marked so in its ``error``."""
     from odometry.metrics import evaluate_trajectory
 
-    gt = sequence.poses
-    bad = ~np.all(np.isfinite(res.poses.reshape(len(res.poses), -1)), axis=1)
+    if not run.ok:
+        return np.zeros(0), {}
+    bad = ~np.all(np.isfinite(run.poses.reshape(len(run.poses), -1)), axis=1)
     if bad.any():
-        res.available, res.note = False, f"diverged: non-finite pose from frame {int(np.argmax(bad))}"
-        return res
-    res.segment_errors_m = segment_errors_per_100m(gt, res.poses, params.segment_length_m, params.step_frames)
-    res.metrics.update(evaluate_trajectory(gt, res.poses).to_dict())
-    return res
+        run.error = f"diverged: non-finite pose from frame {int(np.argmax(bad))}"
+        return np.zeros(0), {}
+    errors = segment_errors_per_100m(gt, run.poses, params.segment_length_m, params.step_frames)
+    return errors, evaluate_trajectory(gt, run.poses).to_dict()
 
 
 @dataclass
 class SequenceResult:
+    """One sequence of the table: its spec, folder (None: simulated in memory), ground truth (N, 4, 4),
+    degeneracy summary, and per method its run, its per-segment errors (m per 100 m; none for a run
+    without poses) and its figures against the truth (``odometry.metrics.TrajectoryMetrics.to_dict``)."""
+
     spec: SequenceSpec
-    folder: Path | None  # None: simulated in memory
+    folder: Path | None
     gt: np.ndarray
     degeneracy: dict
-    methods: dict[str, MethodResult]
+    runs: dict[str, MethodRun]
+    segment_errors: dict[str, np.ndarray]
+    metrics: dict[str, dict]
 
 
 @dataclass
@@ -216,8 +185,8 @@ class TableResult:
 
     def overall(self, method: str, names: list[str] | None = None) -> tuple[float, float, int]:
         """Pooled mean, std (m per 100 m) and segment count of a method over the sequences ``names`` (default all)."""
-        errs = [s.methods[method].segment_errors_m for s in self.sequences
-                if method in s.methods and s.methods[method].available and (names is None or s.spec.name in names)]
+        errs = [s.segment_errors[method] for s in self.sequences
+                if method in s.runs and s.runs[method].ok and (names is None or s.spec.name in names)]
         v = np.concatenate(errs) if errs else np.zeros(0)
         return (float(np.mean(v)), float(np.std(v)), len(v)) if len(v) else (float("nan"), float("nan"), 0)
 
@@ -233,13 +202,15 @@ def run_table(params: TableParams, cache_dir: str | Path | None, record: RunReco
     for spec in params.sequences:
         seq = load_sequence(spec, cache_dir, progress, cache_limit_bytes=cache_limit_bytes)
         folder = seq.path if cache_dir is not None else None
-        methods = {}
+        runs, errors, metrics = {}, {}, {}
         for m in params.methods:
             log.info("table: %s on %s", m, spec.name)
-            methods[m] = run_method(m, seq, params, progress)
-            if record is not None:
-                _write_method_files(record, spec.name, methods[m])
-        results.append(SequenceResult(spec, folder, seq.poses, degeneracy_summary(folder or seq), methods))
+            runs[m] = run_in_table(m, seq, params, progress)
+            errors[m], metrics[m] = score_run(runs[m], seq.poses, params)
+            if record is not None and runs[m].ok:
+                record.write_run(f"poses/{spec.name}/{m}", runs[m])
+        results.append(SequenceResult(spec, folder, seq.poses, degeneracy_summary(folder or seq), runs, errors,
+                                      metrics))
         if record is not None:
             from simlidar.formats.kitti import write_kitti_poses
 
@@ -247,35 +218,24 @@ def run_table(params: TableParams, cache_dir: str | Path | None, record: RunReco
     return TableResult(params, results)
 
 
-def write_method_files(record: RunRecord, stem: str, res: MethodResult) -> None:
-    """A method's poses at ``STEM.txt`` of the run folder and, for ours, its diagnostics at ``STEM_diagnostics.csv``."""
-    from tools.runners import RunFiles, write_run_files
-
-    diagnostics = record.path(f"{stem}_diagnostics.csv") if res.diagnostics is not None else None
-    write_run_files(RunFiles(record.path(f"{stem}.txt"), diagnostics), res.poses, res.diagnostics)
-
-
-def _write_method_files(record: RunRecord, seq_name: str, res: MethodResult) -> None:
-    if res.available:
-        write_method_files(record, f"poses/{seq_name}/{res.method}", res)
-
-
 # ---------------------------------------------------------------- outputs
 def table_rows(result: TableResult) -> list[dict]:
     """One row per (sequence or "overall", method): the table's figures, flat, for CSV and JSON."""
     rows = []
     for s in result.sequences:
-        for m, r in s.methods.items():
-            met = r.metrics
+        for m, r in s.runs.items():
+            met = s.metrics[m]
+            mu, sigma = mean_std(s.segment_errors[m])
+            flags = r.flags or FrameFlags(None, None, None)
             rows.append({
-                "sequence": s.spec.name, "scene": s.spec.scene, "method": METHOD_LABELS[m], "available": r.available,
-                "note": r.note, "mu_m_per_100m": r.mean, "sigma_m_per_100m": r.std,
-                "segments": len(r.segment_errors_m), "path_length_m": met.get("path_length_m"),
+                "sequence": s.spec.name, "scene": s.spec.scene, "method": METHOD_LABELS[m], "available": r.ok,
+                "note": r.error if r.error is not None else r.note, "mu_m_per_100m": mu, "sigma_m_per_100m": sigma,
+                "segments": len(s.segment_errors[m]), "path_length_m": met.get("path_length_m"),
                 "frames": met.get("frames"), "t_err_pct": met.get("t_err_pct"),
                 "r_err_deg_per_100m": met.get("r_err_deg_per_100m"), "ate_rmse_m": met.get("ate_rmse_m"),
                 "ate_aligned_rmse_m": met.get("ate_aligned_rmse_m"), "rpe_t_mean_m": met.get("rpe_t_mean_m"),
-                "rpe_r_mean_deg": met.get("rpe_r_mean_deg"), "flagged_degenerate": r.flagged_degenerate,
-                "extrapolated": r.extrapolated, "frames_per_second": r.frames_per_second,
+                "rpe_r_mean_deg": met.get("rpe_r_mean_deg"), "flagged_degenerate": flags.degenerate,
+                "extrapolated": flags.extrapolated, "frames_per_second": r.frames_per_second,
             })
     for m in result.params.methods:
         mu, sigma, n = result.overall(m)
@@ -297,7 +257,7 @@ def salo_vs_bl(result: TableResult) -> list[dict]:
         return []
     out = []
     for s in result.sequences:
-        b, a = s.methods["bl"].mean, s.methods["salo"].mean
+        b, a = mean_std(s.segment_errors["bl"])[0], mean_std(s.segment_errors["salo"])[0]
         out.append({"sequence": s.spec.name, "bl_mu": b, "salo_mu": a, "salo_better": bool(a < b)
                     if math.isfinite(a) and math.isfinite(b) else None,
                     "change_pct": 100.0 * (a - b) / b if math.isfinite(a) and math.isfinite(b) and b > 0 else None})
@@ -318,7 +278,7 @@ def paper_table_markdown(result: TableResult) -> str:
     header = ["Method"] + [f"{n} {q}" for n in [*seqs, "Overall"] for q in ("mu, m", "sigma, m")]
     cols: dict[str, dict[str, tuple[float, float]]] = {}
     for s in result.sequences:
-        cols[s.spec.name] = {m: (r.mean, r.std) for m, r in s.methods.items() if r.available}
+        cols[s.spec.name] = {m: mean_std(s.segment_errors[m]) for m, r in s.runs.items() if r.ok}
     cols["Overall"] = {m: result.overall(m)[:2] for m in result.params.methods}
     best = {c: min((v[0] for v in d.values() if math.isfinite(v[0])), default=None) for c, d in cols.items()}
     rows = []
@@ -363,9 +323,9 @@ def table_markdown(result: TableResult, params: dict) -> str:
         lines.append(markdown_table(header, rows))
     for m in result.params.methods:
         for s in result.sequences:
-            r = s.methods.get(m)
-            if r is not None and not r.available:
-                lines.append(f"- {METHOD_LABELS[m]}: {r.note}.")
+            r = s.runs.get(m)
+            if r is not None and not r.ok:
+                lines.append(f"- {METHOD_LABELS[m]}: {r.error if r.error is not None else r.note}.")
                 break
     verdict = salo_vs_bl(result)
     if verdict:
@@ -413,6 +373,8 @@ def table_markdown(result: TableResult, params: dict) -> str:
 
 def write_table(result: TableResult, record: RunRecord) -> None:
     """table.md / table.csv / results.json / summary.md and the plots into the run folder."""
+    from tools.plotting import trajectory_grid, trajectory_plot
+
     from . import plots
 
     rows = table_rows(result)
@@ -426,18 +388,18 @@ def write_table(result: TableResult, record: RunRecord) -> None:
         "table": rows, "salo_vs_bl": salo_vs_bl(result),
         "sequences": {s.spec.name: {"spec": s.spec.to_dict(), "folder": None if s.folder is None else str(s.folder),
                                     "degeneracy": s.degeneracy,
-                                    "metrics": {m: r.metrics for m, r in s.methods.items() if r.available},
-                                    "segment_errors_m_per_100m": {m: r.segment_errors_m for m, r in s.methods.items()}}
+                                    "metrics": {m: s.metrics[m] for m, r in s.runs.items() if r.ok},
+                                    "segment_errors_m_per_100m": dict(s.segment_errors)}
                       for s in result.sequences},
     })
     tracks = []
     for s in result.sequences:
-        est = {METHOD_LABELS[m]: r.poses for m, r in s.methods.items() if r.available}
-        errs = {METHOD_LABELS[m]: (r.mean, r.std) for m, r in s.methods.items() if r.available}
+        est = {METHOD_LABELS[m]: r.poses for m, r in s.runs.items() if r.ok}
+        errs = {METHOD_LABELS[m]: mean_std(s.segment_errors[m]) for m, r in s.runs.items() if r.ok}
         tracks.append((s.spec.name, s.gt, est, errs))
-        plots.trajectory_plot(record.path(f"plots/trajectory_{s.spec.name}.png"), s.gt, est, errs,
+        trajectory_plot(record.path(f"plots/trajectory_{s.spec.name}.png"), s.gt, est, errs,
                               title=f"{s.spec.name}: top view", segment_length_m=result.params.segment_length_m)
-    plots.trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=result.params.segment_length_m)
+    trajectory_grid(record.path("trajectories.png"), tracks, segment_length_m=result.params.segment_length_m)
     plots.error_bars(record.path("errors_per_sequence.png"), rows, result.params.segment_length_m)
     record.write_text("summary.md", table_markdown(result, record.params))
 
@@ -464,29 +426,29 @@ def load_table_result(run_dir: str | Path) -> TableResult:
     sequences = []
     for spec in specs:
         stored = res["sequences"][spec.name]
-        methods = {}
+        runs, errors, metrics = {}, {}, {}
         for m in params.methods:
             row = rows[(spec.name, METHOD_LABELS[m])]
             poses_file = run / "poses" / spec.name / f"{m}.txt"
-            r = MethodResult(m, bool(row["available"]), row.get("note") or "")
-            if r.available and poses_file.is_file():
-                r.poses = read_kitti_poses(poses_file)
-                r.segment_errors_m = np.asarray(stored["segment_errors_m_per_100m"][m], dtype=float)
-                r.metrics = stored["metrics"].get(m, {})
-                r.frames_per_second = row.get("frames_per_second") or float("nan")
-                r.flagged_degenerate, r.extrapolated = row.get("flagged_degenerate"), row.get("extrapolated")
+            note = row.get("note") or ""
+            errors[m], metrics[m] = np.zeros(0), {}
+            if row["available"] and poses_file.is_file():
+                flags = FrameFlags(row.get("extrapolated"), row.get("flagged_degenerate"), None)
+                runs[m] = MethodRun(m, read_kitti_poses(poses_file), note=note, flags=flags,
+                                    frames_per_second=row.get("frames_per_second") or float("nan"))
+                errors[m] = np.asarray(stored["segment_errors_m_per_100m"][m], dtype=float)
+                metrics[m] = stored["metrics"].get(m, {})
             else:
-                r.available = False
-            methods[m] = r
+                runs[m] = MethodRun(m, None, error=note)
         gt = read_kitti_poses(run / "poses" / spec.name / "gt.txt")
         folder = None if stored.get("folder") is None else Path(stored["folder"])
-        sequences.append(SequenceResult(spec, folder, gt, stored["degeneracy"], methods))
+        sequences.append(SequenceResult(spec, folder, gt, stored["degeneracy"], runs, errors, metrics))
     return TableResult(params, sequences)
 
 
 def rewrite_table(run_dir: str | Path) -> None:
     """Redraw a finished table run's tables, page and figures from what it stored (run.json kept)."""
-    from .records import read_run
+    from tools.records import read_run
 
     result = load_table_result(run_dir)
     record = RunRecord(run_dir, "table", read_run(run_dir)["params"])

@@ -1,6 +1,6 @@
-"""The leaderboard's figures per sequence (PNG; matplotlib inside the functions, as ``tools.experiments.plots``).
+"""The leaderboard's figures per sequence (PNG; matplotlib inside the functions, as ``tools.plotting``).
 
-- trajectories: the top view of the truth and every method (``plots.trajectory_plot``);
+- trajectories: the top view of the truth and every method (``tools.plotting.trajectory_plot``);
 - error over distance: each method's position error (m, log) against the distance
   travelled, with the frames the simulator's truth finds weakly constrained shaded,
   and beneath, a strip per method that reports its own weak frames;
@@ -20,15 +20,15 @@ FALLBACK_COLORS = ("#1b4f9c", "#d95f02", "#1b9e77", "#7570b3", "#e7298a", "#66a6
 
 
 def method_colors(labels) -> dict:
-    """A colour per method label: the experiments' own for the built-in methods, distinct others for the rest."""
-    from tools.experiments.plots import METHOD_COLORS
+    """A colour per method label: ``tools.plotting``'s for the built-in methods, distinct others for the rest."""
+    from tools.plotting import METHOD_COLORS
 
     spare = iter(c for c in FALLBACK_COLORS)
     return {label: METHOD_COLORS.get(label) or next(spare, "0.5") for label in labels}
 
 
 def _style(label: str) -> tuple:
-    from tools.experiments.plots import METHOD_STYLES
+    from tools.plotting import METHOD_STYLES
 
     return METHOD_STYLES.get(label, ("-", 1.6))
 
@@ -53,7 +53,7 @@ def _span(dist: np.ndarray, first: int, last: int) -> tuple[float, float]:
 
 def trajectories_png(path, gt: np.ndarray, estimates: dict, title: str) -> Path:
     """Top view of ``gt`` (N, 4, 4) and each method's poses (label -> (N, 4, 4))."""
-    from tools.experiments.plots import trajectory_plot
+    from tools.plotting import trajectory_plot
 
     finite = {k: v for k, v in estimates.items() if np.all(np.isfinite(v))}
     return trajectory_plot(path, gt, finite, title=title)
@@ -66,7 +66,7 @@ def draw_error_over_distance(ax, strip, gt: np.ndarray, estimates: dict, truth_w
     from matplotlib.patches import Patch
 
     from odometry.metrics import trajectory_distances
-    from tools.experiments.plots import _plain_log_ticks
+    from tools.plotting import plain_log_ticks
 
     dist = trajectory_distances(gt)
     colors = colors or method_colors(estimates)
@@ -81,11 +81,11 @@ def draw_error_over_distance(ax, strip, gt: np.ndarray, estimates: dict, truth_w
         ax.plot(dist[1:], np.maximum(err[1:], LOG_FLOOR_M), color=colors.get(label), ls=ls, lw=min(lw, 2.2),
                 label=label)
     ax.set_yscale("log")
-    _plain_log_ticks(ax, "y")
+    plain_log_ticks(ax, "y")
     ax.set_ylabel("position error, m (log)")
     ax.grid(True, which="major", alpha=0.3)
     handles, _ = ax.get_legend_handles_labels()
-    if truth_weak is not None:
+    if truth_weak is not None and np.any(truth_weak):  # the shade's entry only where something is shaded
         handles.append(Patch(color=shade, alpha=0.6, label="weak in the truth"))
     ax.legend(handles=handles, loc="upper left", fontsize=8.5, ncol=2, framealpha=0.9)
     rows = (["truth"] if truth_weak is not None else []) + list(own_weak)
@@ -116,10 +116,10 @@ def error_over_distance_png(path, gt: np.ndarray, estimates: dict, truth_weak: n
     estimates: label -> (N, 4, 4). truth_weak: (N,) bool from the sequence's degeneracy (None:
     unknown). own_weak: label -> (N,) bool for the methods that report their own weak frames.
     """
-    from tools.experiments.plots import _figure, save_png
+    from tools.plotting import new_figure, save_png
 
     rows = len(own_weak) + (truth_weak is not None)
-    fig = _figure(figsize=(10.0, 4.6 + 0.32 * max(rows, 1)))
+    fig = new_figure(figsize=(10.0, 4.6 + 0.32 * max(rows, 1)))
     ax, strip = fig.subplots(2, 1, sharex=True, height_ratios=[4.0, 0.45 * max(rows, 1)])
     draw_error_over_distance(ax, strip, gt, estimates, truth_weak, own_weak)
     ax.set_title(title)
@@ -130,10 +130,10 @@ def error_vs_eigenvalue_png(path, gt: np.ndarray, estimates: dict, t_eig0: np.nd
                             title: str) -> Path:
     """Each frame's translation error (m per frame, frame k-1 to k) against the truth's weakest eigenvalue at k."""
     from odometry.metrics import relative_pose_errors
-    from tools.experiments.plots import _figure, _plain_log_ticks, save_png
+    from tools.plotting import new_figure, plain_log_ticks, save_png
 
     colors = method_colors(estimates)
-    fig = _figure(figsize=(8.0, 5.2))
+    fig = new_figure(figsize=(8.0, 5.2))
     ax = fig.subplots()
     eig = np.maximum(np.asarray(t_eig0, dtype=float), 1e-6)
     for label, poses in estimates.items():
@@ -147,7 +147,7 @@ def error_vs_eigenvalue_png(path, gt: np.ndarray, estimates: dict, t_eig0: np.nd
     ax.axvline(threshold, color="0.3", ls="--", lw=1, label=f"weak below {threshold:g}")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    _plain_log_ticks(ax)
+    plain_log_ticks(ax)
     ax.set_xlabel("smallest translational eigenvalue of the truth's information per return (log)")
     ax.set_ylabel("translation error of the frame, m (log)")
     ax.grid(True, which="major", alpha=0.3)

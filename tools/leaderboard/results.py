@@ -6,6 +6,7 @@ re-running the others::
     OUT/results/<method>/<sequence>/
       poses.txt          the method's KITTI poses (NaN after a divergence)
       diagnostics.csv    our odometry's per-frame diagnostics (its own degenerate flags)
+      config.yaml        our odometry's configuration of the run
       command.log        an external command's output
       result.json        written last (atomically): the method's key, the sequence's key, status,
                          figures, frames/s, the frames the method flagged, the error of a failed run
@@ -59,8 +60,8 @@ def _finite(value):
 def evaluate(gt: np.ndarray, poses: np.ndarray) -> dict:
     """The leaderboard's figures of ``poses`` against ``gt`` (both (N, 4, 4)): KITTI t_err and r_err over
     the generalisation suite's segment lengths, vertical drift, aligned ATE, RPE
-    (``tools.experiments.generalize.trajectory_figures``), and failed (diverged or t_err above its bound)."""
-    from tools.experiments.generalize import FAILURE_T_ERR_PCT, trajectory_figures
+    (``tools.family_suite.trajectory_figures``), and failed (diverged or t_err above its bound)."""
+    from tools.family_suite import FAILURE_T_ERR_PCT, trajectory_figures
 
     figures = trajectory_figures(gt, poses)
     t_err = figures.get("t_err_pct")
@@ -78,7 +79,7 @@ def run_one(method, sequence, out: str | Path, fields, *, timeout_s: float, work
     """
     from simlidar.dataset import open_sequence
     from simlidar.formats.kitti import write_kitti_poses
-    from tools.methods import MethodError, run_method_staged
+    from tools.methods import MethodError, run_method
 
     folder = result_dir(out, method.name, sequence.id)
     shutil.rmtree(folder, ignore_errors=True)
@@ -91,14 +92,17 @@ def run_one(method, sequence, out: str | Path, fields, *, timeout_s: float, work
     result["fields"] = list(fields)
     t0 = time.perf_counter()
     try:
-        output = run_method_staged(method, seq, fields=fields,
-                                   workdir=workdir, log_path=folder / "command.log", timeout_s=timeout_s,
-                                   on_frame=on_frame)
+        output = run_method(method, seq, fields=fields, workdir=workdir, log_path=folder / "command.log",
+                            timeout_s=timeout_s, on_frame=on_frame)
         write_kitti_poses(folder / "poses.txt", output.poses)
         if output.diagnostics is not None:
-            from odometry.pipeline import write_diagnostics_csv
+            from odometry.diagnostics import write_diagnostics_csv
 
             write_diagnostics_csv(folder / "diagnostics.csv", output.diagnostics)
+        if isinstance(output.settings.get("config"), dict):  # ours: what its page recomputes the kept points by
+            import yaml
+
+            atomic_write_text(folder / "config.yaml", yaml.safe_dump(output.settings["config"], sort_keys=False))
         flagged = [] if output.degenerate is None else [int(k) for k in np.flatnonzero(output.degenerate)]
         result.update(status="ok", error=None, note=output.note, seconds=output.seconds,
                       frames_per_second=_finite(output.frames_per_second), flagged_frames=flagged,

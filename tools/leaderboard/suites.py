@@ -1,9 +1,11 @@
-"""The sequences a bench runs over: the regression suite, the generalisation suite, or a sweep spec.
+"""The sequences a bench runs over: the regression suite, the generalisation suite, its weather suite, or a sweep spec.
 
 Each becomes a list of ``BenchSequence``: a simulated sequence folder under the
 bench's output folder (simulated once, reused by every later run), its scene
 family (the leaderboard's table groups by it), and the per-point fields its
 methods may see (the generalisation suite's "real" kind: none, as real KITTI).
+The weather suite's sequences are grouped by their weather condition (a table
+each: clear air, light fog, dense fog, rain, snow), the clear one the others' twin.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-SUITES = ("regress", "generalize")
+SUITES = ("regress", "generalize", "weather")
 
 
 class SuiteError(ValueError):
@@ -46,15 +48,16 @@ def bench_sequences(suite: str | Path, out: str | Path, *, frames: int | None = 
     """The suite's sequences under ``out``/sequences, simulating those not there yet.
 
     suite: "regress" (``tools.sweep.regress.SUITE``), "generalize" (the evaluation split of
-    ``tools.experiments.generalize``; ``frames`` and ``families`` narrow it) or a sweep spec
-    YAML (its scenes x seeds x sensors x noise levels; its variants are not used).
+    ``tools.family_suite``; ``frames`` and ``families`` narrow it), "weather" (its simulated
+    sequences in each weather condition, ``family_suite.weather_suite``; the same narrowing) or a
+    sweep spec YAML (its scenes x seeds x sensors x noise levels; its variants are not used).
     on_sequence(id) before each simulation. Raises SuiteError.
     """
     out = Path(out)
-    if str(suite) == "generalize":
-        return _generalize(out, frames, families, on_sequence)
+    if str(suite) in ("generalize", "weather"):
+        return _generalize(out, frames, families, on_sequence, weather=str(suite) == "weather")
     if families:
-        raise SuiteError("--families narrows the generalize suite only")
+        raise SuiteError("--families narrows the generalize and weather suites only")
     return _sweep(suite, out, frames, on_sequence)
 
 
@@ -89,12 +92,13 @@ def _sweep(suite, out: Path, frames: int | None, on_sequence) -> list[BenchSeque
     return sequences
 
 
-def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_sequence) -> list[BenchSequence]:
-    from tools.experiments.generalize import DEFAULT_FRAMES, GeneralizeParams, simulate_to_folder
+def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_sequence,
+                weather: bool = False) -> list[BenchSequence]:
+    from tools.family_suite import DEFAULT_FRAMES, EVALUATION_SEEDS, simulate_to_folder, suite, weather_suite
 
     try:
-        params = GeneralizeParams(frames=frames or DEFAULT_FRAMES, families=tuple(families))
-        seqs = params.sequences()
+        seqs = weather_suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None) if weather \
+            else suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None)
     except ValueError as exc:
         raise SuiteError(str(exc)) from None
     sequences = []
@@ -108,7 +112,8 @@ def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_seq
             except ValueError as exc:
                 raise SuiteError(f"{seq.name}: {exc}") from None
         fields = None if seq.kind == "simulated" else ()
-        sequences.append(BenchSequence(seq.name, f"{seq.family} ({seq.kind})", path, fields))
+        group = seq.weather if seq.weather is not None else f"{seq.family} ({seq.kind})"
+        sequences.append(BenchSequence(seq.name, group, path, fields))
     return sequences
 
 

@@ -15,7 +15,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from simlidar.formats.atomic import atomic_write_text
-from tools.experiments.plots import save_png
+from tools.plotting import save_png
 
 GROUP_COLUMNS = ("scene", "sensor", "noise_std_m", "variant")
 SUMMARY_METRICS = ("t_err_pct", "r_err_deg_per_100m", "t100_mean_m", "ate_aligned_rmse_m", "rpe_t_rmse_m",

@@ -236,14 +236,14 @@ def _run_and_evaluate(job: RunJob, sequence, run_dir: Path, timings: dict) -> di
     """Run the job's method on the sensor's view of ``sequence`` (a folder, or a sequence in memory) and
     evaluate its poses against the truth, which the method never sees."""
     from simlidar.dataset import open_sequence
-    from tools.methods import run_method_staged
+    from tools.methods import run_method
     from tools.runners import FrameFlags, RunFiles, evaluate_against_truth, write_run_files
 
     sequence_dir = Path(sequence) if isinstance(sequence, (str, Path)) else None
     seq = open_sequence(sequence_dir) if sequence_dir is not None else sequence
     method = job_method(job)
-    out = run_method_staged(method, seq, fields=job.fields, workdir=job.workdir, log_path=run_dir / COMMAND_LOG,
-                            timeout_s=job.command_timeout_s)
+    out = run_method(method, seq, fields=job.fields, workdir=job.workdir, log_path=run_dir / COMMAND_LOG,
+                     timeout_s=job.command_timeout_s)
     files = RunFiles.in_folder(run_dir)
     write_run_files(files, out.poses, out.diagnostics, job.config)
     diagnostics = {}

@@ -14,7 +14,7 @@ are ``preset=None``; on a 40-frame VLP-16 city drive they did not follow the fir
 six frames (4 cm of 60 cm motion per frame), 3.5 m off after 20 m, where the
 preset stays within 0.3 m.
 
-Pose instants (``peer`` module notes). With de-skew on and timestamps given, its
+Pose instants (``tools.peers`` notes). With de-skew on and timestamps given, its
 C++ pipeline (``GenZICP::RegisterFrame``) de-skews from its fourth frame on (it needs
 two poses for a velocity) with ``DeSkewScan``: each point moves by
 ``exp((t - 0.5) log(delta))``, delta the last frame-to-frame motion, t the timestamp
@@ -36,7 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .peer import PEER_MAX_RANGE_M, PeerRun, pose_instant, range_limits, require_peer, run_frames
+from tools.runners import MethodRun
+
+from . import PEER_MAX_RANGE_M, pose_instant, range_limits, require_peer, run_frames
 
 GENZ_DESKEW_INSTANT = 0.5
 # GenZICP::RegisterFrame de-skews only when it holds more than two poses.
@@ -55,7 +57,7 @@ def sweep_fractions(times_s: np.ndarray, sweep_period_s: float | None) -> np.nda
 
 def run_genz_icp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_MAX_RANGE_M,
                  preset: str | None = DEFAULT_PRESET, deskew: bool = True,
-                 frames: slice | None = None, on_frame=None) -> PeerRun:
+                 frames: slice | None = None, on_frame=None) -> MethodRun:
     """Run GenZ-ICP over (a slice of) a sequence (``simlidar.sequence``).
 
     Args:
@@ -67,7 +69,7 @@ def run_genz_icp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_M
         frames: which frames (default all). on_frame: ``on_frame(k)`` after each frame.
 
     Returns:
-        ``PeerRun`` with sweep-start poses. Raises ``peer.PeerUnavailable`` when genz-icp
+        ``tools.runners.MethodRun`` with sweep-start poses. Raises ``tools.peers.PeerUnavailable`` when genz-icp
         is missing or too old.
     """
     require_peer("genz-icp")

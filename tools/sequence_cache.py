@@ -135,7 +135,7 @@ def _build(spec: SequenceSpec):
 
 def spec_key(spec: SequenceSpec, mesh_sha256: str) -> str:
     """10 hex digits identifying the simulated content of ``spec`` (see the module notes)."""
-    from .records import package_version
+    from tools.records import package_version
 
     content = {k: v for k, v in spec.to_dict().items() if k not in ("label", "name")}
     content.update(sensor_model=_sensor_model(spec).to_dict(), mesh_sha256=mesh_sha256, version=package_version())

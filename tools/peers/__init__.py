@@ -1,21 +1,23 @@
 """Peer odometry methods run on our frames through their Python APIs: what the peers share.
 
-The peers (optional extra ``peer``: ``pip install -e '.[peer]'``), one module each:
+The peers are methods like ours (``tools.methods.PeerMethod`` runs them through the one
+interface, ``tools.methods.run_method``). The peers (optional extra ``peer``:
+``pip install -e '.[peer]'``), one module each:
 
-- ``kiss-icp`` (``peer_kiss_icp``): KISS-ICP (Vizzo et al., RA-L 2023), point-to-point
+- ``kiss-icp`` (``kiss_icp``): KISS-ICP (Vizzo et al., RA-L 2023), point-to-point
   ICP against a voxel-hash local map, adaptive threshold, constant-velocity de-skew.
-- ``genz-icp`` (``peer_genz_icp``): GenZ-ICP (Lee et al., RA-L 2025), a KISS-ICP fork
+- ``genz-icp`` (``genz_icp``): GenZ-ICP (Lee et al., RA-L 2025), a KISS-ICP fork
   that weights point-to-plane against point-to-point residuals by local planarity.
-- ``small-gicp`` (``peer_small_gicp``): a scan-to-map pipeline over small_gicp (Koide,
+- ``small-gicp`` (``small_gicp``): a scan-to-map pipeline over small_gicp (Koide,
   JOSS 2024): GICP of each downsampled scan against a Gaussian voxel map that forgets
   voxels not seen for 100 frames, from a constant-velocity guess; no de-skew.
 
 They run on the same frames as our odometry (the finite measured points and, when
 the scans are distorted, their per-point firing times), with the same range limits
 (ours, capped at ``PEER_MAX_RANGE_M``, KISS-ICP's and GenZ-ICP's default), so all
-see the same points. Each runner returns a ``PeerRun``; ``peer_unavailable_reason``
-says why a peer cannot run (not installed, too old), and the table and the odometry
-bench print that instead of a row.
+see the same points. Each runner returns a ``tools.runners.MethodRun`` (with the peer's
+own poses and their instants); ``peer_unavailable_reason`` says why a peer cannot run
+(not installed, too old), and the table and the odometry bench print that instead of a row.
 
 Which instant a peer's pose belongs to. Our ground truth and our odometry give the
 sensor pose at each sweep's *start*. A peer's pose of frame k belongs to the
@@ -62,13 +64,14 @@ import logging
 import re
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
 from simlidar import se3
 from simlidar.sequence import deskew_times
+from tools.runners import MethodRun
 
 log = logging.getLogger(__name__)
 
@@ -97,11 +100,11 @@ class PeerSpec:
 
 PEERS: dict[str, PeerSpec] = {p.name: p for p in (
     PeerSpec("kiss-icp", "KISS-ICP", "kiss-icp", "kiss_icp.kiss_icp", "1.3",
-             "tools.experiments.peer_kiss_icp:run_kiss_icp"),
+             "tools.peers.kiss_icp:run_kiss_icp"),
     PeerSpec("genz-icp", "GenZ-ICP", "genz-icp", "genz_icp.genz_icp", "0.3.2",
-             "tools.experiments.peer_genz_icp:run_genz_icp"),
+             "tools.peers.genz_icp:run_genz_icp"),
     PeerSpec("small-gicp", "small_gicp s2m", "small_gicp", "small_gicp", "1.0.1",
-             "tools.experiments.peer_small_gicp:run_small_gicp"),
+             "tools.peers.small_gicp:run_small_gicp"),
 )}
 
 
@@ -212,31 +215,6 @@ def sweep_start_poses(poses: np.ndarray, instants) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- the run
-@dataclass
-class PeerRun:
-    """A peer over a sequence.
-
-    poses: (N, 4, 4) ``T_first_lidar`` at each sweep's start (first = identity).
-    config: every setting used, the peer's version, and the input kind.
-    seconds: wall time of the frame loop (reading frames included, as for our odometry).
-    method_poses: (N, 4, 4) the poses as the peer returned them.
-    instants: (N,) the instant each of those belongs to, sweep periods after the sweep start.
-    After a divergence (``config["diverged_at_frame"]``) all three are NaN.
-    """
-
-    poses: np.ndarray
-    config: dict
-    seconds: float
-    method_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
-    instants: np.ndarray = field(default_factory=lambda: np.zeros(0))
-
-    @property
-    def frames_per_second(self) -> float:
-        """Frames registered per second of ``seconds`` (up to a divergence)."""
-        done = int(np.sum(np.isfinite(self.instants))) if len(self.instants) else len(self.poses)
-        return done / self.seconds if self.seconds > 0 else float("nan")
-
-
 # register(points (M, 3) float64 m, times (M,) float64 s or None) -> (pose (4, 4), pose instant)
 Register = Callable[[np.ndarray, "np.ndarray | None"], "tuple[np.ndarray, float]"]
 
@@ -248,7 +226,7 @@ def valid_pose(T: np.ndarray) -> bool:
 
 
 def run_frames(name: str, sequence, register: Register, config: dict, frames: slice | None = None,
-               on_frame: Callable[[int], None] | None = None) -> PeerRun:
+               on_frame: Callable[[int], None] | None = None) -> MethodRun:
     """The loop every peer shares: feed each frame to ``register``, convert to sweep-start poses.
 
     Each frame's finite points (and their times, see ``scan_times``) go to
@@ -256,8 +234,10 @@ def run_frames(name: str, sequence, register: Register, config: dict, frames: sl
     pose instant (``pose_instant``). A pose that is not a finite rigid transform
     ends the run (the peer diverged): that frame and the rest get NaN poses and
     ``config["diverged_at_frame"]`` says where. ``config`` is completed with the
-    peer's version and the input kind. ``frames``: which frames (default all);
-    ``on_frame(k)`` after each (progress).
+    peer's version and the input kind (the run's ``settings``). ``frames``: which frames
+    (default all); ``on_frame(k)`` after each (progress). Returns the run: sweep-start
+    poses, the wall time of the loop (reading frames included, as for our odometry), the
+    peer's own poses and their instants (NaN from a divergence on).
     """
     idx = np.arange(len(sequence))[frames if frames is not None else slice(None)]
     n = len(idx)
@@ -292,10 +272,11 @@ def run_frames(name: str, sequence, register: Register, config: dict, frames: sl
     config = {**config, "version": peer_version(name), "frames": n, "frames_with_times": timed,
               "diverged_at_frame": diverged_at}
     log.info("%s: %d frames (%d with per-point times) in %.1f s", name, n, timed, seconds)
-    return PeerRun(poses, config, seconds, method_poses, instants)
+    return MethodRun(name, poses, seconds, note=f"{name} {config['version']}", settings=config,
+                     method_poses=method_poses, instants=instants)
 
 
-def run_peer(name: str, sequence, **kwargs) -> PeerRun:
+def run_peer(name: str, sequence, **kwargs) -> MethodRun:
     """Run peer ``name`` over ``sequence`` (kwargs: its runner's: ``min_range_m``, ``max_range_m``,
     ``frames``, ``on_frame``, ...). Raises ``PeerUnavailable`` when it cannot run here."""
     module, func = _spec(name).runner.split(":")

@@ -10,7 +10,7 @@ has touched for ``lru_horizon_frames`` inserts (checked every ``lru_clear_cycle_
 ``GaussianVoxelMap.set_lru``). The first scan only seeds the map (its pose is the identity).
 
 small_gicp has no de-skew: a scan with per-point times is registered as measured and
-its pose belongs to mid-sweep (``peer.UNDESKEWED_INSTANT``); a scan without times is
+its pose belongs to mid-sweep (``tools.peers.UNDESKEWED_INSTANT``); a scan without times is
 registered in its own frame (instant 0).
 """
 
@@ -25,8 +25,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from simlidar import se3
+from tools.runners import MethodRun
 
-from .peer import PEER_MAX_RANGE_M, PeerRun, pose_instant, range_limits, require_peer, run_frames
+from . import PEER_MAX_RANGE_M, pose_instant, range_limits, require_peer, run_frames
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,7 @@ class SmallGicpConfig:
 
 
 def run_small_gicp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_MAX_RANGE_M,
-                   config: SmallGicpConfig | None = None, frames: slice | None = None, on_frame=None) -> PeerRun:
+                   config: SmallGicpConfig | None = None, frames: slice | None = None, on_frame=None) -> MethodRun:
     """Run the small_gicp scan-to-map pipeline over (a slice of) a sequence (``simlidar.sequence``).
 
     Args:
@@ -65,7 +66,7 @@ def run_small_gicp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER
         frames: which frames (default all). on_frame: ``on_frame(k)`` after each frame.
 
     Returns:
-        ``PeerRun`` with sweep-start poses. Raises ``peer.PeerUnavailable`` when small_gicp
+        ``tools.runners.MethodRun`` with sweep-start poses. Raises ``tools.peers.PeerUnavailable`` when small_gicp
         is missing or too old.
     """
     require_peer("small-gicp")

@@ -2,10 +2,10 @@
 
 Configuration: ``KISSConfig()``'s defaults (adaptive threshold, de-skew on, point-to-point
 ICP on a voxel-hash map, max 20 points per voxel) with our range limits
-(``peer.range_limits``) and the voxel size its ``load_config`` derives from the
+(``tools.peers.range_limits``) and the voxel size its ``load_config`` derives from the
 range, ``max_range / 100`` (1 m at 100 m).
 
-Pose instants (``peer`` module notes). ``KissICP.register_frame(points, timestamps)``
+Pose instants (``tools.peers`` notes). ``KissICP.register_frame(points, timestamps)``
 de-skews with ``last_delta``, its previous frame-to-frame motion, when timestamps are
 given: every point moves by ``exp((s - 1) log(last_delta))``, s the times mapped to
 [0, 1] by their minimum and maximum, so the pose it returns is the sensor pose at the
@@ -19,13 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .peer import PEER_MAX_RANGE_M, PeerRun, pose_instant, range_limits, require_peer, run_frames
+from tools.runners import MethodRun
+
+from . import PEER_MAX_RANGE_M, pose_instant, range_limits, require_peer, run_frames
 
 KISS_DESKEW_INSTANT = 1.0
 
 
 def run_kiss_icp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_MAX_RANGE_M,
-                 frames: slice | None = None, on_frame=None) -> PeerRun:
+                 frames: slice | None = None, on_frame=None) -> MethodRun:
     """Run KISS-ICP over (a slice of) a sequence (``simlidar.sequence``).
 
     Args:
@@ -34,7 +36,7 @@ def run_kiss_icp(sequence, min_range_m: float = 2.5, max_range_m: float = PEER_M
         frames: which frames (default all). on_frame: ``on_frame(k)`` after each frame.
 
     Returns:
-        ``PeerRun`` with sweep-start poses. Raises ``peer.PeerUnavailable`` when kiss-icp
+        ``tools.runners.MethodRun`` with sweep-start poses. Raises ``tools.peers.PeerUnavailable`` when kiss-icp
         is missing or too old.
     """
     require_peer("kiss-icp")

@@ -1,4 +1,4 @@
-"""Run folders: what was run, how, and with what; and the writers every experiment shares.
+"""Run folders: what was run, how, and with what; and the writers the experiments and the demo share.
 
 Every experiment writes into one folder and starts by writing ``run.json``:
 the experiment's name, the command line, the resolved parameters (seeds
@@ -53,7 +53,7 @@ def git_state(repo_dir: str | Path | None = None) -> dict | None:
     """The checkout holding this package: commit, whether tracked files differ from it, which, and the
     sha256 of that difference (``git diff HEAD``), so a run made on uncommitted code can still be matched
     to the code it ran. None outside git."""
-    repo = Path(repo_dir) if repo_dir is not None else Path(__file__).resolve().parents[2]
+    repo = Path(repo_dir) if repo_dir is not None else Path(__file__).resolve().parents[1]
 
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], cwd=repo, capture_output=True, text=True, timeout=20,
@@ -183,6 +183,14 @@ class RunRecord:
         path = self.path(relative)
         atomic_write_text(path, text)
         return path
+
+    def write_run(self, stem: str, run) -> None:
+        """A method's run (``tools.runners.MethodRun``) into the folder: its KITTI poses at ``STEM.txt`` and,
+        for ours, its per-frame diagnostics at ``STEM_diagnostics.csv``."""
+        from tools.runners import RunFiles, write_run_files
+
+        diagnostics = self.path(f"{stem}_diagnostics.csv") if run.diagnostics is not None else None
+        write_run_files(RunFiles(self.path(f"{stem}.txt"), diagnostics), run.poses, run.diagnostics)
 
     def finish(self, **extra: Any) -> None:
         t1 = time.time()

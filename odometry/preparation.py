@@ -1,0 +1,117 @@
+"""The registration's first stage, which reads no state: clean a scan and filter it as measured.
+
+clean     drop non-finite points and points outside the range limits (KITTI's angle fix)
+filter    voxel grid -> kNN normals in the raw scan -> NCF -> curvature (``odometry.filters``)
+poles     narrow objects clear of their background (``odometry.poles``; the map variants)
+
+A scan is filtered as measured, and its ICP points, normals and centroids are de-skewed
+afterwards (``odometry.pipeline``), each with its voxel's mean firing time: a voxel's and a
+normal's neighbours fire within microseconds of each other (except at the sweep's seam), so
+they move rigidly, and the beams the NCF's noise follows start at the sensor's origin only in
+the measured frame. Far fewer points to move. Since nothing here reads the odometry's state,
+the next scans are prepared on threads of their own while one registers
+(``odometry.pipeline.register_frames``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from simlidar.sensor import LidarModel
+
+from .config import OdometryConfig
+from .diagnostics import FrameDiagnostics
+from .filters import FilteredScan, filter_scan
+from .gcr import correct_kitti_vertical_angle, ring_of_points
+from .poles import extract_poles
+
+
+@dataclass
+class CleanScan:
+    """A scan with the unusable points removed (``clean_scan``).
+
+    points: (N, 3) finite points within the range limits, sensor frame, m.
+    times_s: (N,) per-point time since the sweep start, s, or None.
+    rings: (N,) int ring per point, or None.
+    kept_rows: (N,) the rows of the input they came from.
+    """
+
+    points: np.ndarray
+    times_s: np.ndarray | None
+    rings: np.ndarray | None
+    kept_rows: np.ndarray
+
+
+def clean_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray | None, config: OdometryConfig,
+               diag: FrameDiagnostics | None = None) -> CleanScan:
+    """Drop non-finite points and those outside ``[min_range_m, max_range_m]``; KITTI's vertical-angle fix.
+
+    points: (N, 3) as measured, m; times_s, rings: (N,) or None. Counts go into ``diag``.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    # (per column and np.compress: np.all(axis=1) and boolean row indexing of an (N, 3) array
+    # are several times slower, and this runs on every raw point)
+    finite_xyz = np.isfinite(points)
+    finite = finite_xyz[:, 0] & finite_xyz[:, 1] & finite_xyz[:, 2]
+    safe = points if finite.all() else np.where(finite[:, None], points, 0.0)
+    r = np.sqrt(np.einsum("ij,ij->i", safe, safe))
+    keep = finite & (r >= config.clean.min_range_m) & (r <= config.clean.max_range_m)
+    out = CleanScan(np.compress(keep, points, axis=0),
+                    None if times_s is None else np.asarray(times_s, dtype=np.float64)[keep],
+                    None if rings is None else np.asarray(rings)[keep], np.flatnonzero(keep))
+    if config.clean.kitti_vertical_correction_deg:
+        out.points = correct_kitti_vertical_angle(out.points, config.clean.kitti_vertical_correction_deg)
+    if diag is not None:
+        diag.points_raw, diag.points_nonfinite = len(points), int((~finite).sum())
+        diag.points_in_range = len(out.points)
+    return out
+
+
+@dataclass
+class PreparedScan:
+    """A scan cleaned and filtered as measured (``prepare_scan``), before any state is used.
+
+    clean: its clean points. scan: its ICP points as measured (de-skewed in place when registered).
+    deskewing: per-point times are known and the de-skew is on. diag, seconds: the frame's
+    diagnostics and stage times so far. seconds_spent: the time its preparation took, s (counted in
+    the frame's total). registered: the odometry has taken it (a scan is registered once).
+    """
+
+    clean: CleanScan
+    scan: FilteredScan
+    deskewing: bool
+    diag: FrameDiagnostics
+    seconds: dict
+    seconds_spent: float
+    registered: bool = False
+
+
+def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray | None, config: OdometryConfig,
+                 sensor: LidarModel | None, with_normals: bool, with_poles: bool) -> PreparedScan:
+    """Clean and filter a scan as measured.
+
+    points: (N, 3) m; times_s, rings: (N,) or None. with_normals: the scan's own normals are
+    computed (``filters.scan_normals_needed``, or a map variant's first scan, a cold-start
+    target). with_poles: its poles are extracted (needs the sensor's range image).
+    """
+    t_start = time.perf_counter()
+    diag = FrameDiagnostics(frame=-1)
+    clean = clean_scan(points, times_s, rings, config, diag)
+    deskewing = config.deskew.enabled and clean.times_s is not None
+    rings_needed = config.gcr.enabled or config.filter.adjacent_ring_reach_m is not None
+    if clean.rings is None and rings_needed and with_normals and sensor is not None:
+        clean.rings = ring_of_points(clean.points, sensor)
+    times = clean.times_s if deskewing else None
+    scan = filter_scan(clean.points, config, clean.rings, sensor, raw_times_s=times, with_normals=with_normals)
+    if with_poles:
+        t = time.perf_counter()
+        rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
+        scan.poles = extract_poles(clean.points, rings, sensor.rings, sensor.columns_per_sweep,
+                                   config.poles.max_width_m, times)
+        scan.counts["poles"] = len(scan.poles)
+        scan.seconds["poles"] = time.perf_counter() - t
+    diag.filter_counts = scan.counts
+    return PreparedScan(clean, scan, deskewing, diag, dict(scan.seconds), time.perf_counter() - t_start)

@@ -1,0 +1,177 @@
+"""The held-out suite: scene families x sensors x data kinds, seeds split into tuning and evaluation.
+
+Scene *families* (``scenes.families``: city, suburb, canyon, tunnel, highway,
+open, forest), each drawn with randomised parameters from a seed; the sensors
+vlp16, hdl32e, salo32, os1-64 and narrow32 rotate over the families and seeds
+(every family and every sensor appear, not every combination); the range noise
+is drawn per sequence between 1 and 3 cm, and the start along the path between
+a standing start and 12 s in (so many sequences start at speed). Every
+(family, seed) comes in two kinds:
+
+- "simulated": motion distortion on, per-point ring and time given to the methods;
+- "real": no motion distortion and no per-point fields (x, y, z only), as real
+  KITTI scans: rings from the elevation, nothing to de-skew with.
+
+Seeds are split in the code: parameters are chosen on ``TUNING_SEEDS`` and the
+figures reported are those of ``EVALUATION_SEEDS``; the two never overlap.
+``simulate`` gives a sequence's frames in memory, ``simulate_to_folder`` a
+sequence folder. ``trajectory_figures`` are the suite's figures of a method's
+poses: KITTI t_err (%) and r_err (deg/100 m) over segments of
+``SEGMENT_LENGTHS_M`` (the sequences are 100-500 m long, shorter than KITTI's
+800 m), the vertical drift, ATE, RPE; a run fails above ``FAILURE_T_ERR_PCT``.
+
+The generalisation experiment (``tools.experiments.generalize``), ``salo bench
+--suite generalize`` (``tools.leaderboard``) and ``tools.open_loop`` run on it.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+SENSORS = ("vlp16", "hdl32e", "salo32", "os1-64", "narrow32")
+KINDS = ("simulated", "real")
+TUNING_SEEDS = (101, 102, 103)
+EVALUATION_SEEDS = (1, 2)
+SPLITS = {"tuning": TUNING_SEEDS, "evaluation": EVALUATION_SEEDS}
+DEFAULT_FRAMES = 200
+SEGMENT_LENGTHS_M = (50.0, 100.0, 150.0, 200.0)
+FAILURE_T_ERR_PCT = 10.0
+MAX_START_S = 12.0
+# Families with a tunnel start where the portal comes at this fraction of the sequence
+# (the canyon's street then its tunnel; mostly inside for the tunnel), whatever the start drawn.
+PORTAL_AT_FRACTION = {"canyon": 0.5, "tunnel": 0.2}
+NOISE_RANGE_M = (0.01, 0.03)
+
+
+@dataclass(frozen=True)
+class SuiteSequence:
+    """One sequence of the suite: a family drawn with a seed, a sensor, a kind of data.
+
+    noise_std_m: range noise (1 sigma), m. start_s: time along the path of the first sweep, s
+    (families in ``PORTAL_AT_FRACTION``: None, the start is placed by the portal). weather: a
+    condition of ``tools.weather_conditions`` (the weather suite), None without.
+    """
+
+    family: str
+    seed: int
+    sensor: str
+    kind: str
+    frames: int
+    noise_std_m: float
+    start_s: float | None
+    weather: str | None = None
+
+    @property
+    def name(self) -> str:
+        base = f"{self.family}-{self.seed}-{self.sensor}-{self.kind}"
+        return base if self.weather is None else f"{base}-{self.weather}"
+
+
+def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
+          kinds: tuple[str, ...] = KINDS) -> list[SuiteSequence]:
+    """The suite's sequences for ``seeds``: every family x seed x kind, the sensor rotating.
+
+    The sensor of the i-th (family, seed) pair is ``SENSORS[i % 5]`` shifted by the
+    first seed, so a split of two seeds over seven families uses every sensor at
+    least twice. Noise and start are drawn from the (family, seed) pair.
+    """
+    from scenes.families import FAMILIES
+
+    families = tuple(families or FAMILIES)
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown family {unknown[0]!r} (known: {', '.join(FAMILIES)})")
+    out = []
+    for family in families:
+        # the family's place in the whole suite, so that a subset of families draws the same sequences
+        fi = list(FAMILIES).index(family)
+        for si, seed in enumerate(seeds):
+            rng = np.random.default_rng([zlib.crc32(family.encode()), int(seed), 0x6E4])
+            sensor = SENSORS[(fi * len(seeds) + si + seeds[0]) % len(SENSORS)]
+            noise = round(float(rng.uniform(*NOISE_RANGE_M)), 4)
+            start = round(float(rng.choice([0.0, rng.uniform(2.0, MAX_START_S)])), 2)
+            if family in PORTAL_AT_FRACTION:
+                start = None
+            out.extend(SuiteSequence(family, int(seed), sensor, kind, frames, noise, start) for kind in kinds)
+    return out
+
+
+def weather_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
+                  conditions: tuple[str, ...] | None = None) -> list[SuiteSequence]:
+    """The weather suite: the suite's "simulated" sequences for ``seeds``, each in every weather condition
+    (``tools.weather_conditions.CONDITIONS``; "clear" is the others' twin), conditions innermost."""
+    from tools.weather_conditions import CONDITIONS, check_condition
+
+    conditions = tuple(check_condition(c) for c in (conditions or CONDITIONS))
+    return [replace(s, weather=c) for s in suite(seeds, frames, families, ("simulated",)) for c in conditions]
+
+
+def suite_world(seq: SuiteSequence):
+    """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
+    from scenes import build_scene
+    from scenes.families import draw_family_params, family_scene
+    from simlidar.sensor import load_sensor
+    from tools.worlds import world_of_scene
+
+    scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
+    world = world_of_scene(scene)
+    sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
+    if seq.weather is not None:
+        from tools.weather_conditions import sensor_in
+
+        sensor = sensor_in(sensor, seq.weather, seq.family, seq.seed)
+    span = seq.frames * sensor.sweep_period_s
+    start = seq.start_s
+    if start is None:
+        portal = float(scene.trajectory.time_at_distance(scene.metadata["interior_s"][0])[0])
+        start = float(np.clip(portal - PORTAL_AT_FRACTION[seq.family] * span, 0.0, scene.trajectory.duration_s - span))
+    available = int((scene.trajectory.duration_s - start) / sensor.sweep_period_s)
+    if seq.frames > available:
+        raise ValueError(f"{seq.name}: the path has room for {available} sweeps after {start:.1f} s, "
+                         f"not {seq.frames}")
+    return world, scene.trajectory, sensor, start
+
+
+def simulate(seq: SuiteSequence, progress=None):
+    """The in-memory frames of a suite sequence (``simlidar.in_memory.InMemorySequence``)."""
+    from simlidar.in_memory import simulate_in_memory
+
+    world, trajectory, sensor, start = suite_world(seq)
+    return simulate_in_memory(world, trajectory, sensor, seq.frames, seed=seq.seed, t_start=start,
+                              fields=seq.kind, name=seq.name, on_frame=progress)
+
+
+def simulate_to_folder(seq: SuiteSequence, out, force: bool = False):
+    """A suite sequence as a sequence folder (``simlidar.simulate.simulate_sequence``): the "real" kind
+    without motion distortion (its per-point fields are the staging's to leave out). Returns the path."""
+    from simlidar.simulate import simulate_sequence
+
+    world, trajectory, sensor, start = suite_world(seq)
+    return simulate_sequence(world, trajectory, sensor, out, frames=seq.frames, seed=seq.seed, t_start=start,
+                             motion_distortion=seq.kind == "simulated", force=force,
+                             info={"command": "bench", "suite_sequence": asdict(seq)})
+
+
+def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
+    """t_err %, r_err deg/100 m (KITTI protocol over segments of ``lengths_m``), vertical drift %,
+    ATE (aligned, m), RPE per frame (cm, deg), path length (m)."""
+    from odometry.metrics import evaluate_trajectory, trajectory_distances
+
+    if not np.all(np.isfinite(est)):
+        return {"t_err_pct": float("inf"), "diverged": True}
+    m = evaluate_trajectory(gt, est, lengths_m=lengths_m)
+    dist = trajectory_distances(gt)
+    length = float(dist[-1])
+    return {
+        "t_err_pct": m.t_err_pct, "r_err_deg_per_100m": m.r_err_deg_per_100m,
+        "vertical_drift_pct": 100.0 * float(est[-1, 2, 3] - gt[-1, 2, 3]) / length if length > 0 else float("nan"),
+        "ate_aligned_m": m.ate_aligned_rmse_m, "rpe_t_cm": 100.0 * m.rpe.t_stats_m.mean,
+        "rpe_r_deg": m.rpe.r_stats_deg.mean, "path_length_m": length, "diverged": False,
+    }
+
+
+__all__ = ["DEFAULT_FRAMES", "EVALUATION_SEEDS", "FAILURE_T_ERR_PCT", "KINDS", "SEGMENT_LENGTHS_M", "SENSORS", "SPLITS",
+           "TUNING_SEEDS", "SuiteSequence", "simulate", "simulate_to_folder", "suite", "trajectory_figures"]
