@@ -19,7 +19,7 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import bridge, canyon, city, forest, garage, highway, open_field, suburb, tunnel
+from . import bare_tunnel, bridge, canyon, city, forest, garage, highway, open_field, suburb, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve, scene_section
 
@@ -35,6 +35,7 @@ SCENES: dict[str, ModuleType] = {
     "canyon": canyon,
     "garage": garage,
     "bridge": bridge,
+    "bare-tunnel": bare_tunnel,
 }
 
 
