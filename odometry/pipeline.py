@@ -33,7 +33,7 @@ import numpy as np
 from simlidar import se3
 from simlidar.formats.scan_folders import Sequence
 from simlidar.sensor import LidarModel
-from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times
+from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times, method_frame
 
 from .cold_start import better_constrained, coarse_config, first_registration
 from .config import OdometryConfig
@@ -664,7 +664,7 @@ def frames_of(sequence: Sequence, frames: slice | None = None) -> np.ndarray:
 def scan_inputs(sequence: Sequence, idx: np.ndarray) -> Iterator[ScanInput]:
     """The frames ``idx`` of a sequence as the odometry takes them (read one at a time)."""
     for k in idx:
-        frame = sequence[int(k)]
+        frame = method_frame(sequence, int(k))
         stamp = float(sequence.times[k]) if sequence.times is not None and k < len(sequence.times) else None
         yield ScanInput(frame.points, deskew_times(sequence, frame), frame.ring, stamp)
 

@@ -269,12 +269,12 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
     own = load_sensor_file(path / "sensor.yaml")  # the firing table the truth was written with
     reader = None
     if version in (2, 3):
-        def reader(car: Path, xyz: np.ndarray) -> np.ndarray:
+        def reader(car: Path, xyz: np.ndarray, with_truth: bool = True) -> np.ndarray:
             try:
                 data = car.read_bytes()
             except OSError as exc:
                 raise DatasetError(f"{car}: cannot read truth ({exc.strerror})") from None
-            return truth.decode(data, xyz, own, where=car)
+            return truth.decode(data, xyz, own, where=car, truth=with_truth)
     imu = imu_truth = None
     if "imu" in manifest:
         for f in (IMU_FILE, IMU_TRUTH_FILE):
