@@ -19,7 +19,7 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import canyon, city, forest, highway, open_field, suburb, tunnel
+from . import canyon, city, forest, highway, open_field, suburb, traffic, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve, scene_section
 
@@ -64,9 +64,11 @@ def build_scene(name: str, seed: int = 0, **overrides: Any) -> Scene:
     params = resolve_params(name, seed, **overrides)
     start = time.perf_counter()
     scene = _module(name).build(params)
-    log.info("built %s (seed %d): %d triangles, %d objects, %.1f s of trajectory in %.2f s",
-             name, params.seed, scene.n_triangles, len(scene.object_labels), scene.trajectory.duration_s,
-             time.perf_counter() - start)
+    if scene.actors is None:  # the scene placed none itself: the traffic of its densities, or nothing
+        scene.actors = traffic.populate(scene, params.traffic, params.seed) if params.traffic.enabled else []
+    log.info("built %s (seed %d): %d triangles, %d objects, %d moving, %.1f s of trajectory in %.2f s",
+             name, params.seed, scene.n_triangles, len(scene.object_labels), len(scene.actors),
+             scene.trajectory.duration_s, time.perf_counter() - start)
     return scene
 
 

@@ -21,6 +21,7 @@ from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
 from .params import CommonParams, ParamError, param
+from .traffic import Lane, RoadLayout
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "divided multi-lane highway with guard rails, sparse signs and gantries, open land"
@@ -129,8 +130,11 @@ def build(p: Params) -> Scene:
     )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
+    w = p.lane_width_m  # the lanes of both carriageways, as offsets from the ego's
+    lanes = tuple(Lane((j - p.lane) * w, 1) for j in range(1, p.lanes + 1)) + tuple(
+        Lane(half_med + (p.lanes - j + 0.5) * w - lane_l, -1) for j in range(1, p.lanes + 1))
     return Scene(
-        "highway", v, f, ids, labels, path, traj, p.to_dict(),
+        "highway", v, f, ids, labels, path, traj, p.to_dict(), roads=RoadLayout(lanes, False), metadata=
         {
             "path_length_m": traj.length_m,
             "road_half_width_m": edge,

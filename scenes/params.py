@@ -14,7 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from paramspec import Param, ParamError, Params, Section, build, param, schema
+from paramspec import Param, ParamError, Params, Section, build, param, schema, section
+
+from .traffic import TrafficParams
 
 # What ``salo scenes`` lists per parameter (name, type, default, unit, help, min, max, choices).
 ParamInfo = Param
@@ -39,6 +41,7 @@ class CommonParams(Params):
     suspension_heave_m: float = param(0.01, "amplitude of the body's vertical oscillation at cruise speed",
                                       min=0.0, max=0.2)
     max_triangles: int = param(1_000_000, "face budget: building a larger mesh is an error", min=1000)
+    traffic: TrafficParams = section(TrafficParams)
 
 
 def resolve(cls: type[CommonParams], overrides: dict[str, Any] | None = None,

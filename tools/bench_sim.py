@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import resource
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -107,7 +108,7 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
     dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
     t = time.perf_counter()
     for _ in range(repeats):
-        rc._scene.run(o32, d32, dists=dist, output=1)
+        rc._scene.run(o32, d32, dists=dist.copy(), output=1)  # (embreex writes the hits back into dists)
     t_bare1 = (time.perf_counter() - t) / repeats
     t = time.perf_counter()
     for _ in range(repeats):
@@ -125,13 +126,21 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
     print(f"  sweep time / bare cast (1 thread):  {t_sweep / t_bare1:.2f}x")
 
 
-def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, tmp_root: str | None) -> None:
-    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast."""
+def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, tmp_root: str | None,
+                     rounds: int = 5) -> None:
+    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast.
+
+    The whole call once (BVH, inside check, sweeps, writing); then, for the CPU per sweep, ``rounds`` rounds
+    of the same sequence simulated again with the world's BVH built (``simulate_sequence``, writing
+    included), the bare cast of its rays and the floor's files and noise, one after the other in each round,
+    so that other jobs on the machine weigh on each alike.
+    """
     from tools.runners import simulate_scene
     from tools.worlds import build_scene_world
 
     sensor = load_sensor(sensor_name)
     scene = build_scene_world(scene_name, seed, {})
+    warm_up(scene.world, sensor)
     marks: dict[int, float] = {}
 
     def on_frame(k, scan):
@@ -139,52 +148,95 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
 
     with tempfile.TemporaryDirectory(dir=tmp_root) as tmp:
         out = Path(tmp) / "seq"
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0 = time.perf_counter()
         done = simulate_scene(scene, sensor, out, frames, seed=seed, on_frame=on_frame)
-        t_end, cpu_sim = time.perf_counter(), time.process_time() - c0
+        t_end = time.perf_counter()
         sizes = {sub: sum(p.stat().st_size for p in (out / sub).iterdir()) for sub in ("velodyne", "sidecar")}
         import json
 
         returns = json.loads((out / "manifest.json").read_text())["points"]
-        cpu_floor_write = floor_write_cpu_s(Path(tmp) / "floor", frames, sizes)
-    cpu_floor_noise = floor_noise_cpu_s(returns // frames)
-    # The same rays, bare: each column from its firing pose, 2 threads, no noise, no truth, nothing written.
-    sim = SweepSimulator(scene.world, sensor, seed=seed)
-    rc = sim.raycaster
-    t_frames = np.arange(frames) * sensor.sweep_period_s
-    rays = []
-    for t in t_frames[:: max(1, frames // 10)]:
-        T = scene.trajectory.pose_at(t + sim._times_unique)
-        R = T[sim._ray_time_idx, :3, :3]
-        d = np.einsum("nij,nj->ni", R, sim._dir_local)
-        o = T[sim._ray_time_idx, :3, 3] - rc.offset
-        rays.append((np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)))
-    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
-    rc.cast_raw(*rays[0], dist)  # warm up
-    t, c = time.perf_counter(), time.process_time()
-    for _ in range(3):
-        for o32, d32 in rays:
-            rc.cast_raw(o32, d32, dist)
-    t_bare = (time.perf_counter() - t) / (3 * len(rays))
-    cpu_bare = (time.process_time() - c) / (3 * len(rays))
+        sim = SweepSimulator(scene.world, sensor, seed=seed)
+        rays = frame_rays(sim, scene.trajectory, np.arange(frames) * sensor.sweep_period_s)
+        cpu = {"simulate": 0.0, "bare cast": 0.0, "files": 0.0, "noise": 0.0}
+        for r in range(rounds):
+            c = time.process_time()
+            simulate_sequence(scene.world, scene.trajectory, sensor, Path(tmp) / f"again{r}", frames=frames, seed=seed,
+                              simulator=sim)
+            cpu["simulate"] += time.process_time() - c
+            shutil.rmtree(Path(tmp) / f"again{r}")  # (a new folder each round, removed outside the timing)
+            cpu["bare cast"] += bare_cast_cpu_s(sim.raycaster, rays, sensor) * frames
+            cpu["files"] += floor_write_cpu_s(Path(tmp) / f"floor{r}", frames, sizes) * frames
+            shutil.rmtree(Path(tmp) / f"floor{r}")
+            cpu["noise"] += floor_noise_cpu_s(returns // frames) * frames
+        per = {k: v / (rounds * frames) for k, v in cpu.items()}
+    t_bare = bare_cast_wall_s(sim.raycaster, rays[:: max(1, frames // 10)], sensor)
     streaming = (frames - 1) / (t_end - marks[0])  # first sweep done -> folder committed
     total = frames / done.seconds
     per_return = {k: v / returns for k, v in sizes.items()}
+    floor = per["bare cast"] + per["files"] + per["noise"]
     print(f"end to end: salo simulate --scene {scene_name} --seed {seed} --frames {frames} --sensor {sensor.name} "
           f"({returns / frames:.0f} returns per sweep)")
-    print(f"  bare embreex, {rc.threads} threads, same rays      {1 / t_bare:6.1f} sweeps/s")
+    print(f"  bare embreex, {sim.raycaster.threads} threads, same rays      {1 / t_bare:6.1f} sweeps/s")
     print(f"  simulate, truth written (streaming)          {streaming:6.1f} sweeps/s   "
           f"{1 / (streaming * t_bare):.2f}x the bare cast's time")
     print(f"  simulate, whole call (BVH, inside check)     {total:6.1f} sweeps/s   "
           f"({t_end - t0:.1f} s, of which {marks[0] - t0:.1f} s before the first sweep was done)")
-    print(f"  CPU time per sweep (all threads; what other jobs on the machine do not change): simulate "
-          f"{1e3 * cpu_sim / frames:.0f} ms, bare cast {1e3 * cpu_bare:.0f} ms ({cpu_sim / frames / cpu_bare:.2f}x)")
+    print(f"  CPU time per sweep (all threads; what other jobs on the machine do not change), {rounds} interleaved "
+          f"rounds of {frames} sweeps: simulate {1e3 * per['simulate']:.1f} ms (writing included), bare cast "
+          f"{1e3 * per['bare cast']:.1f} ms ({per['simulate'] / per['bare cast']:.2f}x)")
     print(f"  on disk per return: scan {per_return['velodyne']:.1f} B + truth {per_return['sidecar']:.1f} B = "
           f"{sum(per_return.values()):.1f} B")
-    floor = cpu_bare + cpu_floor_write + cpu_floor_noise
     print(f"  floor beyond the cast, CPU per sweep: the frame's files written new with their sha256 "
-          f"{1e3 * cpu_floor_write:.1f} ms, its range noise drawn {1e3 * cpu_floor_noise:.1f} ms: on 2 fully used "
-          f"cores at best {floor / cpu_bare:.2f}x the bare cast's time (no truth computed, nothing encoded)")
+          f"{1e3 * per['files']:.1f} ms, its range noise drawn {1e3 * per['noise']:.1f} ms; floor "
+          f"{1e3 * floor:.1f} ms ({floor / per['bare cast']:.2f}x the bare cast's time: no truth computed, nothing "
+          f"encoded)")
+    print(f"  simulate / floor: {per['simulate'] / floor:.2f}x")
+
+
+def warm_up(world: World, sensor) -> None:
+    """One sweep of a small part of ``world``: the compiled kernels loaded (or compiled) before timing."""
+    keep = slice(0, min(len(world.faces), 2000))
+    small = World(world.vertices, world.faces[keep], world.face_object_id[keep], world.object_labels, "warm-up")
+    traj = SampledTrajectory(np.array([0.0]), np.eye(4)[None])
+    for motion in (True, False):
+        sim = SweepSimulator(small, sensor, seed=0, motion_distortion=motion, threads=1)
+        scan = sim.sweep(traj, 0.0)
+    from simlidar.degeneracy import degeneracy
+    from simlidar.formats import truth
+
+    truth.encode(np.zeros(len(scan), np.int64), scan.true_range_m, scan.normal, np.zeros(len(scan), np.int64), None, 4)
+    degeneracy(scan.true_xyz, scan.normal)
+
+
+def frame_rays(sim: SweepSimulator, trajectory, starts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The rays of sweeps starting at ``starts`` (s), each from its firing pose, float32 in the BVH's frame."""
+    rays = []
+    for t in starts:
+        T = trajectory.pose_at(t + sim._times_unique)
+        d = np.einsum("nij,nj->ni", T[sim._ray_time_idx, :3, :3], sim._dir_local)
+        o = T[sim._ray_time_idx, :3, 3] - sim.raycaster.offset
+        rays.append((np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)))
+    return rays
+
+
+def bare_cast_cpu_s(rc, rays, sensor) -> float:
+    """CPU seconds per sweep of the bare threaded Embree call on ``rays`` (no noise, no truth, nothing written)."""
+    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
+    c = time.process_time()
+    for o32, d32 in rays:
+        rc.cast_raw(o32, d32, dist)
+    return (time.process_time() - c) / len(rays)
+
+
+def bare_cast_wall_s(rc, rays, sensor, repeats: int = 3) -> float:
+    """Wall seconds per sweep of the bare threaded Embree call on ``rays`` (after one warm-up cast)."""
+    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
+    rc.cast_raw(*rays[0], dist)
+    t = time.perf_counter()
+    for _ in range(repeats):
+        for o32, d32 in rays:
+            rc.cast_raw(o32, d32, dist)
+    return (time.perf_counter() - t) / (repeats * len(rays))
 
 
 WEATHER_RUNS = {
