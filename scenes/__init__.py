@@ -19,7 +19,20 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import canyon, city, forest, highway, open_field, suburb, traffic, tunnel
+from . import (
+    canyon,
+    city,
+    forest,
+    highway,
+    lead_vehicle,
+    open_field,
+    overtaking_lorry,
+    red_light,
+    suburb,
+    traffic,
+    traffic_jam,
+    tunnel,
+)
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve, scene_section
 
@@ -33,6 +46,10 @@ SCENES: dict[str, ModuleType] = {
     "forest": forest,
     "suburb": suburb,
     "canyon": canyon,
+    "red_light": red_light,
+    "traffic_jam": traffic_jam,
+    "overtaking_lorry": overtaking_lorry,
+    "lead_vehicle": lead_vehicle,
 }
 
 

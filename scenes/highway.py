@@ -51,6 +51,7 @@ class Params(CommonParams):
                                     min=0.0, max=20000.0)
     land_roughness_m: float = param(3.0, "standard deviation of the land's relief", min=0.0, max=30.0)
     tree_groups: int = param(25, "groups of trees scattered in the land", min=0, max=1000)
+    rail_post_spacing_m: float = param(4.0, "spacing of the guard rails' posts (0: a bare beam)", min=0.0, max=100.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -102,7 +103,7 @@ def build(p: Params) -> Scene:
         rail = mb.new_object("rail")
         off = side * (edge + 0.4)
         mb.add(*g.sweep(c, lv, beam + [off, 0.0], closed=True), rail)
-        for i in range(0, len(s), int(round(4.0 / STEP_M))):
+        for i in range(0, len(s), int(round(p.rail_post_spacing_m / STEP_M)) or len(s) + 1):
             q = road.xyz[i] + (off + side * 0.12) * left[i]
             mb.add(*g.box((0.12, 0.1, 0.9), q + 0.45 * UP, road.heading[i]), rail)
 

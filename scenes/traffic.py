@@ -413,14 +413,16 @@ class Signal:
 
 def lane_traffic(lane: LanePath, lengths: list[float], v0: np.ndarray, t0: float, t1: float,
                  signals: tuple[Signal, ...] = (), lateral_m_s2: float = 2.0,
-                 rng: np.random.Generator | None = None) -> list[tuple[SpeedProfile, tuple[float, float]]]:
+                 rng: np.random.Generator | None = None,
+                 enter_s: np.ndarray | None = None) -> list[tuple[SpeedProfile, tuple[float, float]]]:
     """The vehicles of one lane, driving by the intelligent driver model from ``t0`` to ``t1``.
 
     lengths (n,) m and desired speeds v0 (n,) m/s of the vehicles, front to back; on a loop they start
     evenly spread, on an open lane they enter at its start at times spread over the run (when there is
     room: a vehicle waits for the one ahead to leave a headway). Each slows for bends (lateral acceleration
     ``lateral_m_s2``), keeps its headway to the one ahead and stops at a red signal it can stop for.
-    Returns each vehicle's (``SpeedProfile`` through its speeds every 0.5 s, (time it enters, time it leaves)).
+    enter_s: (n,) the times they enter an open lane (default: spread over the run). Returns each vehicle's
+    (``SpeedProfile`` through its speeds every 0.5 s, (time it enters, time it leaves)).
     """
     n = len(lengths)
     if n == 0:
@@ -444,7 +446,8 @@ def lane_traffic(lane: LanePath, lengths: list[float], v0: np.ndarray, t0: float
     else:  # each enters at its start at a time of its own (when there is room), spread over the run
         s = np.full(n, -np.inf)
         entered = np.zeros(n, bool)
-        t_sched = t0 + (np.arange(n) + rng.uniform(0.2, 0.8, n)) * (t1 - t0) / n
+        t_sched = (t0 + (np.arange(n) + rng.uniform(0.2, 0.8, n)) * (t1 - t0) / n if enter_s is None
+                   else np.asarray(enter_s, float))
     v = np.where(entered, np.minimum(v0, 5.0), 0.0)
     steps = int(np.ceil((t1 - t0) / IDM_STEP_S)) + 1
     times = t0 + np.arange(steps) * IDM_STEP_S
