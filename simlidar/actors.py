@@ -20,10 +20,12 @@ An actor (``scenes.actors.Actor`` makes them; anything with these members does):
   angular velocity (n, 3), rad/s), in the world, at times (n,) s.
 
 Per sweep (``ActorSet.for_sweep``), the actors that may come within the sensor's range
-are evaluated at ``KNOTS`` instants over the sweep; between them a ray's pose of the
-actor is a cubic Hermite of the positions and velocities and a constant-rate turn (to
-about a micrometre at 5 m/s^2); only the rays whose direction passes within the actor's
-bounding sphere (grown by the motions during the sweep) are cast against it.
+are evaluated every ``KNOT_STEP_S`` over the sweep (a second's worth at a time, for the
+sweeps that follow: ``ActorSet.knots``); between them a ray's pose of the
+actor is a cubic Hermite of the positions and velocities and a constant-rate turn (a
+micrometre off at 5 m/s^2); only the rays whose direction passes within the actor's
+bounding sphere at their column's instant (``kernels.actors.ray_windows``) and then
+cross its box (``kernels.actors.rays_in_actor_frame``) are cast against its BVH.
 """
 
 from __future__ import annotations
@@ -34,10 +36,13 @@ import numpy as np
 
 from .formats.tracks import TRACK_DTYPE
 from .formats.truth import ACTOR_CLASSES, MOVING_SPEED_M_S
+from .kernels.actors import merge_rows, nearest_actor_hits, ray_windows, rays_in_actor_frame
 from .raycast import CompactHits, Raycaster
 from .world import DEFAULT_REFLECTANCE, LABEL_REFLECTANCE
 
-KNOTS = 41  # instants per sweep at which each actor near the sensor is evaluated
+KNOT_STEP_S = 0.005  # the actors near the sensor are evaluated this often during a sweep (their knots)
+KNOT_TABLE = 201  # knots evaluated at once per actor (a second), reused by the sweeps that follow
+BOX_MARGIN_M = 0.05  # a candidate ray must cross the actor's box grown by this
 CULL_STEP_S = 0.25  # the table of every actor's position that culls those out of reach
 CULL_CHUNK_S = 20.0  # the table is filled this many seconds at a time
 ANGLE_MARGIN_RAD = 2e-3  # added to every window (rounding, a ray's spread within a column)
@@ -61,26 +66,6 @@ class ActorHits:
     velocity: np.ndarray
 
 
-def _rotvec_rotations(w: np.ndarray) -> np.ndarray:
-    """(n, 3) rotation vectors -> (n, 3, 3) rotations (Rodrigues; first order below 1e-8 rad)."""
-    theta = np.linalg.norm(w, axis=1)
-    small = theta < 1e-8
-    th = np.where(small, 1.0, theta)
-    k = w / th[:, None]
-    s, c = np.sin(theta), np.cos(theta)
-    K = np.zeros((len(w), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 0] = -k[:, 2], k[:, 1], k[:, 2]
-    K[:, 1, 2], K[:, 2, 0], K[:, 2, 1] = -k[:, 0], -k[:, 1], k[:, 0]
-    R = np.eye(3) + s[:, None, None] * K + (1 - c)[:, None, None] * (K @ K)
-    if small.any():
-        W = np.zeros((int(small.sum()), 3, 3))
-        ws = w[small]
-        W[:, 0, 1], W[:, 0, 2], W[:, 1, 0] = -ws[:, 2], ws[:, 1], ws[:, 2]
-        W[:, 1, 2], W[:, 2, 0], W[:, 2, 1] = -ws[:, 0], -ws[:, 1], ws[:, 0]
-        R[small] = np.eye(3) + W
-    return R
-
-
 def _rotvec_of(R: np.ndarray) -> np.ndarray:
     """(n, 3, 3) rotations (angles below pi) -> (n, 3) rotation vectors."""
     v = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
@@ -90,11 +75,22 @@ def _rotvec_of(R: np.ndarray) -> np.ndarray:
 
 
 def _quaternion(R: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotations -> (n, 4) unit quaternions (w, x, y, z), w >= 0."""
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(R).as_quat()  # (x, y, z, w)
-    q = np.concatenate([q[:, 3:], q[:, :3]], axis=1)
+    """(n, 3, 3) rotations -> (n, 4) unit quaternions (w, x, y, z), w >= 0 (from the largest of the four's
+    squares, as Shepperd's method does)."""
+    tr = np.trace(R, axis1=1, axis2=2)
+    sq = np.stack([1 + tr, 1 + 2 * R[:, 0, 0] - tr, 1 + 2 * R[:, 1, 1] - tr, 1 + 2 * R[:, 2, 2] - tr], 1)  # 4 q_i^2
+    best = np.argmax(sq, axis=1)
+    big = np.sqrt(np.maximum(sq[np.arange(len(R)), best], 1e-300)) / 2  # |q_best|
+    a, b = (R[:, 2, 1] - R[:, 1, 2]), (R[:, 0, 2] - R[:, 2, 0])
+    c, d = (R[:, 1, 0] - R[:, 0, 1]), (R[:, 0, 1] + R[:, 1, 0])
+    e, f = (R[:, 0, 2] + R[:, 2, 0]), (R[:, 1, 2] + R[:, 2, 1])
+    q = np.empty((len(R), 4))
+    rows = [np.stack([4 * big**2, a, b, c], 1), np.stack([a, 4 * big**2, d, e], 1),
+            np.stack([b, d, 4 * big**2, f], 1), np.stack([c, e, f, 4 * big**2], 1)]
+    for k in range(4):
+        on = best == k
+        q[on] = rows[k][on] / (4 * big[on, None])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
     return q * np.where(q[:, :1] < 0, -1.0, 1.0)
 
 
@@ -102,15 +98,16 @@ class ActorSet:
     """The actors of a world, their BVHs and a coarse table of where each is, for the sweeps.
 
     actors: the actor objects (see the module doc). first_object_id: the id of the first (the
-    static world's object count); actor ``i`` has object id ``first_object_id + i``.
+    static world's object count); actor ``i`` has object id ``first_object_id + i``. max_range_m: the
+    sensor's (the models' places in their one BVH lie farther apart than a ray can go and come back).
     """
 
-    def __init__(self, actors: list, first_object_id: int):
+    def __init__(self, actors: list, first_object_id: int, max_range_m: float = 1000.0):
         self.actors = list(actors)
         self.first_object_id = int(first_object_id)
         n = len(self.actors)
         models: dict[str, int] = {}
-        self.raycasters: list[Raycaster] = []
+        meshes: list = []
         self.model_of = np.empty(n, np.int64)
         self.class_code = np.empty(n, np.uint8)
         self.reflectance = np.empty(n)
@@ -123,8 +120,8 @@ class ActorSet:
                 raise ActorError(f"{where}: class {a.kind!r} is not one of {', '.join(ACTOR_CLASSES[1:])}")
             m = a.model
             if m.name not in models:
-                models[m.name] = len(self.raycasters)
-                self.raycasters.append(Raycaster(m.vertices, m.faces, threads=1))
+                models[m.name] = len(meshes)
+                meshes.append(m)
             self.model_of[i] = models[m.name]
             self.class_code[i] = ACTOR_CLASSES.index(a.kind)
             self.reflectance[i] = LABEL_REFLECTANCE.get(a.label, DEFAULT_REFLECTANCE)
@@ -134,10 +131,46 @@ class ActorSet:
                 raise ActorError(f"{where}: its time span ends ({t_off}) before it starts ({t_on})")
             self.span[i] = t_on, t_off
         self.radius = 0.5 * np.linalg.norm(self.box_size, axis=1)
+        self._fleet(meshes, float(max_range_m))
+        self._knot_tables: dict[int, tuple] = {}
         self._cull_table()
 
     def __len__(self) -> int:
         return len(self.actors)
+
+    def _fleet(self, meshes: list, max_range_m: float) -> None:
+        """One BVH of every model, each moved to a place of its own on a grid (``model_shift``) farther apart
+        than a ray from the sensor (within range of an actor) can reach: a ray in an actor's frame, shifted
+        by its model's place, meets that model alone, so the rays of every actor of a block are cast in one
+        call."""
+        if not meshes:
+            self.model_shift, self.fleet = np.zeros((0, 3)), None
+            return
+        size = max(float(np.ptp(np.asarray(m.vertices), axis=0).max()) for m in meshes)
+        spacing = 2.0 * (max_range_m + 1.0) + 2.0 * size + 10.0
+        side = int(np.ceil(np.sqrt(len(meshes))))
+        self.model_shift = np.array([[spacing * (k % side), spacing * (k // side), 0.0] for k in range(len(meshes))])
+        verts, faces, base = [], [], 0
+        for m, shift in zip(meshes, self.model_shift, strict=True):
+            verts.append(np.asarray(m.vertices, float) + shift)
+            faces.append(np.asarray(m.faces, np.int64) + base)
+            base += len(m.vertices)
+        self.fleet = Raycaster(np.vstack(verts), np.vstack(faces), threads=1)
+
+    def knots(self, i: int, t0: float, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Actor ``i``'s motion (``motion_at``) at the ``n`` knots ``t0 + k KNOT_STEP_S``: from a table of
+        ``KNOT_TABLE`` knots kept per actor, evaluated afresh when ``t0`` is not one of its knots (so a
+        sequence's sweeps, a whole number of knots apart, evaluate each actor once a second)."""
+        table = self._knot_tables.get(i)
+        if table is not None:
+            x = (t0 - table[0]) / KNOT_STEP_S
+            k = int(round(x))
+            if abs(x - k) < 1e-6 and 0 <= k and k + n <= len(table[1]):
+                return table[1][k:k + n], table[2][k:k + n], table[3][k:k + n]
+        times = t0 + np.arange(max(n, KNOT_TABLE)) * KNOT_STEP_S
+        T, v, w = self.actors[i].motion_at(times)
+        self._knot_tables[i] = (t0, T, v, w)
+        return T[:n], v[:n], w[:n]
 
     @property
     def labels(self) -> list[str]:
@@ -228,158 +261,110 @@ class SweepActors:
         self.aset, self.sim, self.t0 = aset, sim, float(t0)
         self.frozen = T_cols is None
         self.T_ref = T_ref
-        period = 0.0 if self.frozen else s.sweep_period_s
-        self.knot_t = t0 + np.linspace(0.0, period, KNOTS)
-        self.dt = period / (KNOTS - 1)
+        nk = 1 if self.frozen else int(np.ceil(s.sweep_period_s / KNOT_STEP_S - 1e-9)) + 1
+        self.dt = 0.0 if self.frozen else KNOT_STEP_S
+        self.knot_t = t0 + np.arange(nk) * KNOT_STEP_S
         n = len(idx)
-        T = np.empty((n, KNOTS, 4, 4))
-        v = np.empty((n, KNOTS, 3))
-        w = np.empty((n, KNOTS, 3))
+        T = np.empty((n, nk, 4, 4))
+        v = np.empty((n, nk, 3))
+        w = np.empty((n, nk, 3))
         for j, i in enumerate(idx):
-            T[j], v[j], w[j] = aset.actors[i].motion_at(self.knot_t)
+            T[j], v[j], w[j] = aset.knots(i, float(t0), nk)
         self.alive = (self.knot_t[None] >= aset.span[idx, 0, None]) & (self.knot_t[None] <= aset.span[idx, 1, None])
         self.idx, self.T, self.v, self.w = idx, T, v, w
         # the turn between consecutive knots, as a rotation vector in the earlier knot's frame
         R = T[:, :, :3, :3]
         rel = np.swapaxes(R[:, :-1], -1, -2) @ R[:, 1:]
-        self.turn = _rotvec_of(rel.reshape(-1, 3, 3)).reshape(n, KNOTS - 1, 3) if KNOTS > 1 else None
-        self.candidates = [self._window(j, T_cols) for j in range(n)]
-        keep = [j for j in range(n) if len(self.candidates[j])]
-        self._keep = keep
+        self.turn = np.ascontiguousarray(_rotvec_of(rel.reshape(-1, 3, 3)).reshape(n, nk - 1, 3))
+        self.vdt = np.ascontiguousarray(v * self.dt)
+        half = aset.box_size[idx] / 2 + BOX_MARGIN_M
+        self.box_lo = np.ascontiguousarray(aset.box_centre[idx] - half)
+        self.box_hi = np.ascontiguousarray(aset.box_centre[idx] + half)
+        self.candidates = self._windows(T_cols)
 
     # ------------------------------------------------------------ which rays may meet an actor
-    def _window(self, j: int, T_cols) -> np.ndarray:
-        """Sorted global indices of the sweep's rays that may meet actor ``j`` (of this sweep)."""
+    def _windows(self, T_cols) -> list[np.ndarray]:
+        """Per actor of this sweep, the sorted global indices of the sweep's rays that may meet it
+        (``kernels.actors.ray_windows``)."""
         s, aset = self.sim.sensor, self.aset
-        i = self.idx[j]
-        C, rings = s.columns_per_sweep, s.rings
-        centre = self.T[j, :, :3, :3] @ aset.box_centre[i] + self.T[j, :, :3, 3]  # (K, 3) world
-        col_t = self.t0 + np.arange(C) * (0.0 if self.frozen else s.column_period_s)
-        if T_cols is None:
-            Rc = np.broadcast_to(self.T_ref[:3, :3], (C, 3, 3))
-            pc = np.broadcast_to(self.T_ref[:3, 3], (C, 3))
-        else:
-            Rc, pc = T_cols[:C, :3, :3], T_cols[:C, :3, 3]
+        C = s.columns_per_sweep
+        centre = np.ascontiguousarray(self.T[:, :, :3, :3] @ aset.box_centre[self.idx][:, None, :, None])[..., 0] \
+            + self.T[:, :, :3, 3]
         if self.frozen:
-            c_at = np.broadcast_to(centre[0], (C, 3))
-            alive = np.full(C, bool(self.alive[j, 0]))
+            col_t = np.full(C, self.t0)
+            Rc = np.ascontiguousarray(np.broadcast_to(self.T_ref[:3, :3], (C, 3, 3)))
+            pc = np.ascontiguousarray(np.broadcast_to(self.T_ref[:3, 3], (C, 3)))
         else:
-            c_at = np.stack([np.interp(col_t, self.knot_t, centre[:, k]) for k in range(3)], axis=1)
-            alive = np.interp(col_t, self.knot_t, self.alive[j].astype(float)) > 0
-        rel = np.einsum("cji,cj->ci", Rc, c_at - pc)  # the centre in the sensor frame at each column
-        dist = np.linalg.norm(rel, axis=1)
-        speed = float(np.linalg.norm(self.v[j], axis=1).max())
-        # within a column the actor moves by speed x column period, and the Hermite curve stays within 1 mm
-        r = aset.radius[i] + speed * s.column_period_s + 0.01
+            col_t = self.t0 + np.arange(C) * s.column_period_s
+            Rc, pc = np.ascontiguousarray(T_cols[:C, :3, :3]), np.ascontiguousarray(T_cols[:C, :3, 3])
+        speed = np.linalg.norm(self.v, axis=2).max(axis=1)
+        # within a column the actor moves by speed x column period; the Hermite curve stays within a millimetre
+        radius = aset.radius[self.idx] + speed * s.column_period_s + 0.01
         spread = ANGLE_MARGIN_RAD + np.radians(4.0 * s.angular_jitter_deg + 0.5 * s.beam_divergence_deg)
-        inside = dist <= r
-        half = np.arcsin(np.clip(r / np.maximum(dist, 1e-9), 0.0, 1.0)) + spread
-        half_az = half + (np.abs(s.ring_azimuth_offset_rad).max() if rings else 0.0)
-        az = np.arctan2(rel[:, 1], rel[:, 0])
-        col_az = s.column_azimuth_rad(np.arange(C))
-        d_az = np.abs((col_az - az + np.pi) % (2 * np.pi) - np.pi)
-        horiz = np.hypot(rel[:, 0], rel[:, 1])
-        # within reach (the box's nearest point no farther than the maximum range), alive, and facing it
-        cols = np.flatnonzero(alive & (dist - r <= s.max_range_m) & (inside | (d_az <= half_az)))
-        if len(cols) == 0:
-            return np.zeros(0, np.int64)
-        if inside[cols].any():
-            ring_sel = np.arange(rings)
-        else:
-            el = np.arctan2(rel[cols, 2], horiz[cols])
-            lo, hi = float((el - half[cols]).min()), float((el + half[cols]).max())
-            ring_sel = np.flatnonzero((s.elevation_rad >= lo) & (s.elevation_rad <= hi))
-        if len(ring_sel) == 0:
-            return np.zeros(0, np.int64)
-        return (cols[:, None] * rings + ring_sel[None, :]).ravel()
+        az_extra = float(np.abs(s.ring_azimuth_offset_rad).max()) if s.rings else 0.0
+        # above and below its centre: its box's half height, and its half length tilted by a pitch or roll of its
+        # own (up to a 10 % grade) or of the sensor's (in the sensor frame: up to 0.1 rad, a hard braking dive)
+        size = aset.box_size[self.idx]
+        half_height = size[:, 2] / 2 + 0.2 * np.hypot(size[:, 0], size[:, 1]) / 2 + 0.05
+        counts, rays = ray_windows(np.ascontiguousarray(centre), self.alive, self.knot_t, col_t, Rc, pc, radius,
+                                   np.ascontiguousarray(half_height), float(spread), az_extra,
+                                   s.column_azimuth_rad(np.arange(C)), np.ascontiguousarray(s.elevation_rad),
+                                   float(s.max_range_m))
+        return np.split(rays, np.cumsum(counts)[:-1])
 
     # ------------------------------------------------------------ casting
-    def _poses(self, j: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(R (n, 3, 3), p (n, 3)) of this sweep's actors ``j`` (n,) at times ``t`` (n,): Hermite positions,
-        constant-rate turns between knots."""
-        if self.frozen or self.dt == 0:
-            return self.T[j, 0, :3, :3], self.T[j, 0, :3, 3]
-        x = np.clip((t - self.t0) / self.dt, 0.0, KNOTS - 1 - 1e-12)
-        k = x.astype(np.int64)
-        u = x - k
-        p0, p1 = self.T[j, k, :3, 3], self.T[j, k + 1, :3, 3]
-        v0, v1 = self.v[j, k] * self.dt, self.v[j, k + 1] * self.dt
-        u2, u3 = u * u, u * u * u
-        h00, h10, h01, h11 = 2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u, -2 * u3 + 3 * u2, u3 - u2
-        p = h00[:, None] * p0 + h10[:, None] * v0 + h01[:, None] * p1 + h11[:, None] * v1
-        R = self.T[j, k, :3, :3] @ _rotvec_rotations(self.turn[j, k] * u[:, None])
-        return R, p
-
-    def _velocity(self, j: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(velocity of the origin (n, 3), angular velocity (n, 3)) of actors ``j`` at ``t``, linear between knots."""
-        if self.frozen or self.dt == 0:
-            return self.v[j, 0], self.w[j, 0]
-        x = np.clip((t - self.t0) / self.dt, 0.0, KNOTS - 1 - 1e-12)
-        k = x.astype(np.int64)
-        u = (x - k)[:, None]
-        return (self.v[j, k] * (1 - u) + self.v[j, k + 1] * u, self.w[j, k] * (1 - u) + self.w[j, k + 1] * u)
-
-    def cast(self, rows_of: list[np.ndarray], origin_world: np.ndarray, direction: np.ndarray,
-             ray_time: np.ndarray, max_distance: float) -> ActorHits | None:
+    def cast(self, rows: np.ndarray, j: np.ndarray, origin: np.ndarray, offset: np.ndarray, direction: np.ndarray,
+             t_rows: np.ndarray, max_distance: float) -> ActorHits | None:
         """The nearest actor hit of each of a call's rays.
 
-        rows_of: per actor of this sweep (index j), the rows of the call's rays that may meet it.
-        origin_world, direction: (n, 3) the call's rays in the world; ray_time: (n,) s.
+        rows (n,), j (n,): the rows of the call's rays that may meet an actor, and which (of this sweep's);
+        origin + offset (3,), direction: (B, 3) the call's rays in the world; t_rows (n,): each row's time, s.
         """
-        js = [np.full(len(r), j, np.int64) for j, r in enumerate(rows_of) if len(r)]
-        if not js:
+        if len(rows) == 0:
             return None
-        rows = np.concatenate([r for r in rows_of if len(r)])
-        j = np.concatenate(js)
-        R, p = self._poses(j, ray_time[rows])
-        o_a = np.einsum("nji,nj->ni", R, origin_world[rows] - p)
-        d_a = np.einsum("nji,nj->ni", R, direction[rows])
-        model = self.aset.model_of[self.idx[j]]
-        found = []
-        for m in np.unique(model):
-            sel = np.flatnonzero(model == m)
-            rc = self.aset.raycasters[m]
-            h = rc.cast_compact(np.ascontiguousarray(o_a[sel] - rc.offset), np.ascontiguousarray(d_a[sel]),
-                                max_distance)
-            if len(h.ray):
-                found.append((sel[h.ray], h.distance, h.cos_incidence, rc._face_normal[h.face]))
-        if not found:
+        keep, o_a, d_a, R, p = rays_in_actor_frame(rows, j, t_rows, origin, offset, direction, self.T, self.vdt,
+                                                   self.turn, self.t0, 0.0 if self.frozen else self.dt, self.box_lo,
+                                                   self.box_hi, float(max_distance))
+        if len(keep) == 0:
             return None
-        sel = np.concatenate([f[0] for f in found])
-        dist = np.concatenate([f[1] for f in found])
-        cos = np.concatenate([f[2] for f in found])
-        n_model = np.concatenate([f[3] for f in found])
-        # the nearest actor per ray
-        order = np.lexsort((dist, rows[sel]))
-        sel, dist, cos, n_model = sel[order], dist[order], cos[order], n_model[order]
-        first = np.ones(len(sel), bool)
-        first[1:] = rows[sel][1:] != rows[sel][:-1]
-        sel, dist, cos, n_model = sel[first], dist[first], cos[first], n_model[first]
-        normal = np.einsum("nij,nj->ni", R[sel], n_model)
-        hit = origin_world[rows[sel]] + direction[rows[sel]] * dist[:, None]
-        v, w = self._velocity(j[sel], ray_time[rows[sel]])
-        velocity = v + np.cross(w, hit - p[sel])
-        return ActorHits(rows[sel], dist, cos, normal, self.idx[j[sel]], velocity)
+        rows, j, t_rows = rows[keep], j[keep], t_rows[keep]
+        fleet = self.aset.fleet
+        o_a += self.aset.model_shift[self.aset.model_of[self.idx[j]]] - fleet.offset
+        h = fleet.cast_compact(o_a, d_a, max_distance)
+        if len(h.ray) == 0:
+            return None
+        ray, dist, cos, normal, who, velocity = nearest_actor_hits(
+            len(origin), rows, h.ray, h.distance, h.cos_incidence, np.take(fleet._face_normal, h.face, axis=0),
+            R, p, j, t_rows, origin, offset, direction, self.v, self.w, self.t0, 0.0 if self.frozen else self.dt)
+        return ActorHits(ray, dist, cos, normal, self.idx[who], velocity)
 
-    def block_rows(self, a: int, b: int) -> list[np.ndarray]:
-        """Per actor of this sweep, the rays of the block a:b (global firing indices) that may meet it, as rows
-        of the block (0 .. b - a - 1)."""
-        out = []
-        for c in self.candidates:
-            lo, hi = np.searchsorted(c, a), np.searchsorted(c, b)
-            out.append(c[lo:hi] - a)
-        return out
+    def split(self, bounds: np.ndarray) -> None:
+        """Cut the candidate rays at the sweep's block bounds (global firing indices, ascending): per block, its
+        rows that may meet an actor and which (``block_rows``)."""
+        cands = np.concatenate(self.candidates)
+        j = np.repeat(np.arange(len(self.candidates)), [len(c) for c in self.candidates])
+        block = np.searchsorted(bounds, cands, side="right") - 1
+        order = np.argsort(block, kind="stable")  # by block, then actor, then ray
+        cands, j, block = cands[order], j[order], block[order]
+        cuts = np.searchsorted(block, np.arange(len(bounds)))
+        self._blocks = {int(bounds[k]): (cands[cuts[k]:cuts[k + 1]] - bounds[k], j[cuts[k]:cuts[k + 1]])
+                        for k in range(len(bounds) - 1)}
 
-    def rows_of_rays(self, rays: np.ndarray) -> list[np.ndarray]:
-        """Per actor, the rows of ``rays`` (sorted global firing indices, repeats allowed) that may meet it."""
-        out = []
-        for c in self.candidates:
+    def block_rows(self, a: int) -> tuple[np.ndarray, np.ndarray]:
+        """(rows of the block starting at ray ``a`` that may meet an actor, which actor of this sweep's each)."""
+        return self._blocks[a]
+
+    def rows_of_rays(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rows of ``rays`` (sorted global firing indices, repeats allowed) that may meet an actor, which)."""
+        rows, js = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        for k, c in enumerate(self.candidates):
             if len(c) == 0 or len(rays) == 0:
-                out.append(np.zeros(0, np.int64))
                 continue
             pos = np.clip(np.searchsorted(c, rays), 0, len(c) - 1)
-            out.append(np.flatnonzero(c[pos] == rays))
-        return out
+            mine = np.flatnonzero(c[pos] == rays)
+            rows.append(mine)
+            js.append(np.full(len(mine), k, np.int64))
+        return np.concatenate(rows), np.concatenate(js)
 
     # ------------------------------------------------------------ per frame truth
     def tracks(self, scan_object_id: np.ndarray) -> np.ndarray:
@@ -410,33 +395,22 @@ class SweepActors:
         return rows
 
 
-def merge_hits(static: CompactHits, n_rays: int, found: ActorHits | None) -> CompactHits:
-    """The nearest of the static world's hit and the actors' hit of each of ``n_rays`` rays.
+def merge_hits(static: CompactHits, found: ActorHits | None) -> CompactHits:
+    """The nearest of the static world's hit and the actors' hit of each ray
+    (``kernels.actors.merge_rows``).
 
     The result is ordered by ray, as ``static``; its ``actor`` rows (>= 0) carry the actor's
-    normal (world, outward) and the velocity of the point hit.
+    normal (world, outward) and the velocity of the point hit (one row each, in order).
     """
     if found is None:
         return static
-    t_static = np.full(n_rays, np.inf)
-    t_static[static.ray] = static.distance
-    win = found.distance < t_static[found.ray]
-    if not win.any():
+    ray, face, distance, cos, actor, taken = merge_rows(static.ray, static.face, static.distance,
+                                                       static.cos_incidence, found.ray, found.distance,
+                                                       found.cos_incidence, found.actor)
+    if len(taken) == 0:
         return static
-    ray_a = found.ray[win]
-    lost = np.zeros(n_rays, bool)
-    lost[ray_a] = True
-    keep = ~lost[static.ray]
-    ray = np.concatenate([static.ray[keep], ray_a])
-    order = np.argsort(ray, kind="stable")
-    m_s, m_a = int(keep.sum()), len(ray_a)
-    face = np.concatenate([static.face[keep], np.full(m_a, -1, np.int64)])[order]
-    distance = np.concatenate([static.distance[keep], found.distance[win]])[order]
-    cos = np.concatenate([static.cos_incidence[keep], found.cos_incidence[win]])[order]
-    actor = np.concatenate([np.full(m_s, -1, np.int64), found.actor[win]])[order]
-    normal = np.concatenate([np.zeros((m_s, 3)), found.normal[win]])[order]
-    velocity = np.concatenate([np.zeros((m_s, 3)), found.velocity[win]])[order]
-    return CompactHits(ray[order], face, distance, cos, static.face_normals, actor, normal, velocity)
+    return CompactHits(ray, face, distance, cos, static.face_normals, actor, found.normal[taken],
+                       found.velocity[taken])
 
 
-__all__ = ["KNOTS", "ActorError", "ActorHits", "ActorSet", "SweepActors", "merge_hits"]
+__all__ = ["KNOT_STEP_S", "KNOT_TABLE", "ActorError", "ActorHits", "ActorSet", "SweepActors", "merge_hits"]

@@ -52,8 +52,9 @@ class CompactHits:
     face_normals: (F, 3) the mesh's unit face normals (the raycaster's table, shared, not copied).
     ``normal`` (m, 3): the hit triangle's unit normal turned towards the ray origin, made when asked.
     With moving objects (``simlidar.actors.merge_hits``): actor (m,) the actor hit (-1: the static
-    world; face is then -1 on an actor's row), actor_normal (m, 3) its outward normal in the world,
-    actor_velocity (m, 3) the velocity of the point hit, m/s; None without.
+    world; face is then -1 on an actor's row); actor_normal (k, 3) its outward normal in the world and
+    actor_velocity (k, 3) the velocity of the point hit, m/s, one row per actor row (``actor >= 0``), in
+    order; None without.
     """
 
     ray: np.ndarray
@@ -69,18 +70,24 @@ class CompactHits:
     def normal(self) -> np.ndarray:
         n = np.take(self.face_normals, self.face, axis=0)
         if self.actor is not None:
-            on = self.actor >= 0
-            n[on] = self.actor_normal[on]
+            n[self.actor >= 0] = self.actor_normal
         n *= -np.sign(self.cos_incidence)[:, None]  # face the ray origin
         return n
 
     def select(self, mask: np.ndarray) -> CompactHits:
-        """The rows ``mask`` (a boolean mask or indices) picks."""
+        """The rows ``mask`` (a boolean mask or ascending indices) picks."""
         if self.actor is None:
             return CompactHits(self.ray[mask], self.face[mask], self.distance[mask], self.cos_incidence[mask],
                                self.face_normals)
+        slot = self.actor_slots()[mask]
+        slot = slot[slot >= 0]
         return CompactHits(self.ray[mask], self.face[mask], self.distance[mask], self.cos_incidence[mask],
-                           self.face_normals, self.actor[mask], self.actor_normal[mask], self.actor_velocity[mask])
+                           self.face_normals, self.actor[mask], self.actor_normal[slot], self.actor_velocity[slot])
+
+    def actor_slots(self) -> np.ndarray:
+        """(m,) each row's place in ``actor_normal`` and ``actor_velocity`` (-1 on the static world's rows)."""
+        on = self.actor >= 0
+        return np.where(on, np.cumsum(on) - 1, -1)
 
 
 class Raycaster:

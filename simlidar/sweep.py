@@ -49,6 +49,7 @@ if any (true range, point, normal, object); without one, NaN and object -1.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,6 +171,42 @@ class CastBlock:
     gain: np.ndarray | None = None
 
 
+# A scan's per-return arrays: {field: (dtype, columns)}; with moving objects, their truth's too.
+SCAN_FIELDS = {"xyz": (np.float64, 3), "intensity": (np.float32, 1), "ring": (np.int64, 1),
+               "azimuth_index": (np.int64, 1), "time_s": (np.float64, 1), "range_m": (np.float64, 1),
+               "true_range_m": (np.float64, 1), "true_xyz": (np.float64, 3), "normal": (np.float64, 3),
+               "object_id": (np.int32, 1)}
+ACTOR_FIELDS = {"object_class": (np.uint8, 1), "moving": (np.bool_, 1), "velocity": (np.float64, 3)}
+
+
+class ScanMemory:
+    """The per-return arrays of a simulator's scans, reused once a scan is let go.
+
+    Writing fresh memory costs a page fault per 4 kB page, and a sweep's arrays are some 17 MB
+    (on the development machine, a virtual machine that hands free memory back to its host,
+    the faults were a fifth of a sweep's CPU time whenever the allocator did not happen to reuse
+    the last scan's memory). Each scan's arrays are views of a set allocated for a whole sweep's
+    rays; a set none of whose arrays is referenced any more (the writer has written its frame,
+    the caller dropped it) is handed to the next sweep. A set still referenced is never reused.
+    """
+
+    def __init__(self, fields: dict, capacity: int, keep: int = 4):
+        self.fields, self.capacity, self.keep = fields, int(capacity), keep
+        self._sets: list[dict[str, np.ndarray]] = []
+
+    def arrays(self, n: int) -> dict[str, np.ndarray]:
+        """Uninitialised arrays of ``n`` rows, one per field."""
+        for arrays in self._sets:
+            # each referenced only by this dict and getrefcount's argument: no scan holds a view of them
+            if len(arrays["xyz"]) >= n and all(sys.getrefcount(arrays[k]) <= 2 for k in arrays):
+                return {k: a[:n] for k, a in arrays.items()}
+        size = max(n, self.capacity)
+        arrays = {k: np.empty((size, cols) if cols > 1 else size, dt) for k, (dt, cols) in self.fields.items()}
+        if len(self._sets) < self.keep:
+            self._sets.append(arrays)
+        return {k: a[:n] for k, a in arrays.items()}
+
+
 # An empty draw: the kernels' placeholder where no draws are made (no dropouts, exponent 1).
 _NO_DRAWS = np.empty(0)
 _NO_INDEX = np.empty(0, np.int64)
@@ -209,7 +246,7 @@ class SweepSimulator:
         self.motion_distortion = motion_distortion
         self.raycaster = raycaster or Raycaster(world.vertices, world.faces, threads=threads)
         self._reflectance = world.object_reflectance
-        self.actors = ActorSet(world.actors, len(world.object_labels)) if world.actors else None
+        self.actors = ActorSet(world.actors, len(world.object_labels), sensor.max_range_m) if world.actors else None
         if self.actors is not None:  # the actors' object ids follow the static world's
             self._reflectance = np.concatenate([self._reflectance, self.actors.reflectance])
         cols, rings = sensor.columns_per_sweep, sensor.rings
@@ -226,6 +263,12 @@ class SweepSimulator:
         bias_rng = np.random.default_rng([self.seed, 0xB1A5])
         self.ring_bias_m = bias_rng.normal(0.0, 1.0, rings) * sensor.ring_bias_std_m
         self._weather = WeatherModel(sensor) if sensor.receiver.enabled else None
+        fields = dict(SCAN_FIELDS)
+        if sensor.weather.on:
+            fields["weather"] = (np.uint8, 1)
+        if self.actors is not None:
+            fields.update(ACTOR_FIELDS)
+        self._memory = ScanMemory(fields, sensor.rays_per_sweep)
 
     @staticmethod
     def _directions(elevation: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
@@ -275,20 +318,16 @@ class SweepSimulator:
             acts = self.actors.for_sweep(self, t0, T_ref, T_cols if self.motion_distortion else None)
         cols = np.linspace(0, s.columns_per_sweep, N_BLOCKS + 1).astype(int)
         blocks = [(k, cols[k] * s.rings, cols[k + 1] * s.rings) for k in range(N_BLOCKS)]
+        if acts is not None:
+            acts.split(cols * s.rings)
         cast = self.raycaster.map(lambda blk: self._cast_block(*blk, T_ref, T_fire, frame_index, t0, acts), blocks)
         # Fill preallocated outputs block by block (no concatenation pass).
         sizes = [len(c.measured) for c in cast]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
         n = int(offsets[-1])
-        out = Scan(
-            xyz=np.empty((n, 3)), intensity=np.empty(n, np.float32), ring=np.empty(n, np.int64),
-            azimuth_index=np.empty(n, np.int64), time_s=np.empty(n), range_m=np.empty(n),
-            true_range_m=np.empty(n), true_xyz=np.empty((n, 3)), normal=np.empty((n, 3)),
-            object_id=np.empty(n, np.int32), motion=motion,
-            weather=np.empty(n, np.uint8) if s.weather.on else None,
-        )
+        out = Scan(**self._memory.arrays(n), motion=motion)
         if self.actors is not None:
-            out.object_class, out.moving, out.velocity = np.zeros(n, np.uint8), np.zeros(n, bool), np.zeros((n, 3))
+            out.object_class[:], out.moving[:], out.velocity[:] = 0, False, 0.0
         jobs = list(zip(cast, offsets[:-1], strict=True))
         self.raycaster.map(lambda job: self._fill_block(job[0], out, job[1], T_ref), jobs)
         if self.actors is not None:
@@ -320,9 +359,9 @@ class SweepSimulator:
         o_bvh, d_bvh, o32, d32 = block_rays(dir_local, R, t, pose_of_ray, s.rings, rc.offset)
         hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0, o32, d32)
         if acts is not None:  # the nearest of the static hit and the moving objects' at each ray's instant
-            found = acts.cast(acts.block_rows(a, b), o_bvh + rc.offset, d_bvh, t0 + self.ray_time_s[a:b],
-                              s.max_range_m + 1.0)
-            hits = merge_hits(hits, b - a, found)
+            rows, which = acts.block_rows(a)
+            found = acts.cast(rows, which, o_bvh, rc.offset, d_bvh, t0 + self.ray_time_s[a + rows], s.max_range_m + 1.0)
+            hits = merge_hits(hits, found)
         if self._weather is not None:
             return self._cast_weather(k, a, b, hits, rng, frame_index, dir_local, o_bvh, d_bvh, t0, acts)
 
@@ -369,9 +408,10 @@ class SweepSimulator:
         rows = CompactHits(got.ray, face, distance, cos_incidence, hits.face_normals)
         if hits.actor is not None:  # a beam's surface may be a moving object
             rows.actor = np.full(len(got.ray), -1, np.int64)
-            rows.actor_normal, rows.actor_velocity = np.zeros((len(got.ray), 3)), np.zeros((len(got.ray), 3))
-            rows.actor[surface], rows.actor_normal[surface] = hits.actor[hit], hits.actor_normal[hit]
-            rows.actor_velocity[surface] = hits.actor_velocity[hit]
+            rows.actor[surface] = hits.actor[hit]
+            slot = hits.actor_slots()[hit]
+            slot = slot[slot >= 0]  # (the rows keep the hits' order)
+            rows.actor_normal, rows.actor_velocity = hits.actor_normal[slot], hits.actor_velocity[slot]
         ring = self.ray_ring[a + got.ray]
         sigma = np.full(len(ring), s.range_noise_std_m)
         on_surface = got.kind == SURFACE
@@ -418,9 +458,10 @@ class SweepSimulator:
         sub = rc.cast_compact(sub_origin, dirs, s.max_range_m + 1.0)
         if acts is not None:  # the sub-rays meet the moving objects too, at their beam's instant
             parent = np.repeat(a + hits.ray, S)
-            found = acts.cast(acts.rows_of_rays(parent), sub_origin + rc.offset, dirs, t0 + self.ray_time_s[parent],
+            rows, which = acts.rows_of_rays(parent)
+            found = acts.cast(rows, which, sub_origin, rc.offset, dirs, t0 + self.ray_time_s[parent[rows]],
                               s.max_range_m + 1.0)
-            sub = merge_hits(sub, m * S, found)
+            sub = merge_hits(sub, found)
         dist = np.full(m * S, np.inf)
         power = np.zeros(m * S)
         dist[sub.ray] = sub.distance
@@ -472,7 +513,7 @@ class SweepSimulator:
             on = np.flatnonzero(hits.actor >= 0)
             rows = off + on
             out.object_class[rows] = self.actors.class_code[hits.actor[on]]
-            velocity = hits.actor_velocity[on] @ R_ref
+            velocity = hits.actor_velocity @ R_ref
             out.velocity[rows] = velocity
             out.moving[rows] = np.linalg.norm(velocity, axis=1) > MOVING_SPEED_M_S
         if c.kind is not None:

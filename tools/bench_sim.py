@@ -7,6 +7,7 @@
     python -m tools.bench_sim --big-world 2000000 --e2e-frames 0   # a tiled city of >= 2M triangles:
                                               # load time, sweeps/s, memory over a 300-frame sequence
     python -m tools.bench_sim --weather-repeats 0  # skip the weather's cost (simlidar.weather)
+    python -m tools.bench_sim --actors-repeats 0   # skip the moving actors' cost (simlidar.actors)
 
 The end-to-end run calls ``tools.runners.simulate_scene``, the function behind
 ``salo simulate --scene``, writing the sequence (scans and truth) to a temporary
@@ -18,6 +19,9 @@ The weather's cost: CPU time per sweep of the same sweeps (the end-to-end city's
 sensor and path, interleaved so that other jobs on the machine weigh on each alike)
 with the sensor as it is, with the receiver's power model on in clear air, and in
 dense fog, rain and snow, each against the sensor as it is.
+
+The moving actors' cost: CPU time per sweep with 20 and with 100 actors near the sensor
+(the city's traffic at high densities, the nearest ones), interleaved with the static world's.
 
 Prints figures; it asserts nothing (speed is measured here, never in tests).
 """
@@ -239,6 +243,54 @@ def bare_cast_wall_s(rc, rays, sensor, repeats: int = 3) -> float:
     return (time.perf_counter() - t) / (repeats * len(rays))
 
 
+def bench_actors(scene_name: str, seed: int, sensor_name: str, repeats: int, counts=(20, 100)) -> None:
+    """CPU per sweep with ``counts`` moving actors near the sensor against the static world, sweeps interleaved.
+
+    The actors are the scene's traffic at high densities (``scenes.traffic``: vehicles, cyclists, people), the
+    ``n`` nearest the sensor in the middle of the swept time, so that all of them are in its range.
+    """
+    import scenes
+    from simlidar.raycast import Raycaster
+    from tools.worlds import world_of_scene
+
+    sensor = load_sensor(sensor_name)
+    dense = {"enabled": True, "cars_per_km": 150.0, "vans_per_km": 30.0, "lorries_per_km": 15.0, "buses_per_km": 8.0,
+             "cyclists_per_km": 40.0, "pedestrians_per_km": 400.0}
+    scene = scenes.build_scene(scene_name, seed=seed, traffic=dense)
+    t0 = 20.0
+    times = t0 + 0.1 * np.arange(repeats)
+    ego = scene.trajectory.pose_at(np.array([times.mean()]))[0, :3, 3]
+    dist = np.array([np.linalg.norm(a.motion_at(np.array([times.mean()]))[0][0, :3, 3] - ego) for a in scene.actors])
+    order = np.argsort(dist)
+    world = world_of_scene(scene)
+    rc = Raycaster(world.vertices, world.faces)
+    sims = {"static": SweepSimulator(world.without_actors(), sensor, seed=seed, raycaster=rc)}
+    for n in counts:
+        if n > len(order):
+            print(f"actors: the scene's dense traffic has {len(order)} actors, not {n}: skipped")
+            continue
+        chosen = World(world.vertices, world.faces, world.face_object_id, world.object_labels, world.source,
+                       actors=[scene.actors[i] for i in order[:n]])
+        sims[f"{n} actors"] = SweepSimulator(chosen, sensor, seed=seed, raycaster=rc)
+        print(f"  {n} actors: the farthest {dist[order[n - 1]]:.0f} m from the sensor in the middle of the sweeps")
+    cpu = dict.fromkeys(sims, 0.0)
+    on_actors = dict.fromkeys(sims, 0)
+    for sim in sims.values():
+        sim.sweep(scene.trajectory, t0 - 1.0)  # warm up (the actors' BVHs, the kernels)
+    for k, t in enumerate(times):
+        for name, sim in sims.items():
+            c = time.process_time()
+            scan = sim.sweep(scene.trajectory, float(t), frame_index=k)
+            cpu[name] += time.process_time() - c
+            on_actors[name] += int(np.sum(scan.object_id >= len(world.object_labels)))
+    ref = cpu["static"]
+    print(f"actors: {repeats} sweeps each of {sensor_name} in {scene_name} seed {seed} from {t0:g} s, CPU per sweep "
+          "(all threads), interleaved")
+    for name in sims:
+        print(f"  {name:10s} {1e3 * cpu[name] / repeats:6.1f} ms  {cpu[name] / ref:5.2f}x the static sweep   "
+              f"({on_actors[name] / repeats:,.0f} returns a sweep off the actors)")
+
+
 WEATHER_RUNS = {
     "receiver on, clear air": {},
     "dense fog, MOR 60 m": {"fog": {"enabled": True, "mor_m": 60.0}},
@@ -407,6 +459,8 @@ def main() -> None:
     ap.add_argument("--tmp", help="folder for the end-to-end sequence (default: the system's temporary folder)")
     ap.add_argument("--weather-repeats", type=int, default=20,
                     help="sweeps of each weather run (0: skip the weather's cost)")
+    ap.add_argument("--actors-repeats", type=int, default=20,
+                    help="sweeps of each moving-actor run, 20 and 100 actors against none (0: skip)")
     args = ap.parse_args()
     t = time.perf_counter()
     world = bench_world()
@@ -416,6 +470,8 @@ def main() -> None:
         bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp)
     if args.weather_repeats:
         bench_weather(args.e2e_scene, args.e2e_seed, args.sensor, args.weather_repeats)
+    if args.actors_repeats:
+        bench_actors(args.e2e_scene, args.e2e_seed, args.sensor, args.actors_repeats)
     if args.big_world:
         bench_big_world(args.big_world, args.sensor, args.big_frames, args.tmp)
     if args.memory:

@@ -127,8 +127,8 @@ def fill_rows(off: int, first_ray: int, ray: np.ndarray, face: np.ndarray, dista
     t_ref (3,), R_ref (3, 3): the reference pose (its translation in the BVH's frame).
     cosk_pow: (m,) ``|cos|^k`` when the intensity's exponent k is not 1, else empty (|cos| is used).
     row_actor: (m,) the moving object a row hit (``simlidar.actors``; -1: the static world), or empty;
-    an actor's row takes its normal from row_normal (m, 3) (outward, in the world) and its object id
-    ``first_actor_object + row_actor``.
+    an actor's row takes its normal from row_normal (k, 3) (outward, in the world; a row per actor row,
+    in order) and its object id ``first_actor_object + row_actor``.
     numpy: ``xyz = measured * dir_local[ray]``; ``true_xyz = (d_bvh[ray] * distance + o_bvh[ray] - t_ref)
     @ R_ref``; ``normal = (face_normals[face] @ R_ref) * -sign(cos)``; ``object = face_object_id[face]``;
     ``intensity = reflectance[object] * cosk * minimum(1, (range_ref / maximum(measured, 1e-6))^2)``;
@@ -139,6 +139,7 @@ def fill_rows(off: int, first_ray: int, ray: np.ndarray, face: np.ndarray, dista
     fused_rows = m - m % BATCH_ROWS
     use_pow = cosk_pow.shape[0] == m and m > 0
     actors = row_actor.shape[0] == m and m > 0
+    slot = 0
     for i in range(m):
         o = off + i
         b = ray[i]
@@ -155,8 +156,9 @@ def fill_rows(off: int, first_ray: int, ray: np.ndarray, face: np.ndarray, dista
         _rotate_row(h0, h1, h2, R_ref, true_xyz, o, fused)
         f = face[i]
         if actors and row_actor[i] >= 0:
-            _rotate_row(row_normal[i, 0], row_normal[i, 1], row_normal[i, 2], R_ref, normal, o, fused)
+            _rotate_row(row_normal[slot, 0], row_normal[slot, 1], row_normal[slot, 2], R_ref, normal, o, fused)
             obj = first_actor_object + row_actor[i]
+            slot += 1
         else:
             _rotate_row(face_normals[f, 0], face_normals[f, 1], face_normals[f, 2], R_ref, normal, o, fused)
             obj = face_object_id[f]
