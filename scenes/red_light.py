@@ -149,8 +149,9 @@ def _queue_beside(p, rng, jx, y_lane, height, t_stop, t_go, duration) -> list[Ac
     names = ["car-saloon", "van", "car-hatchback", "lorry-rigid", "car-suv", "car-saloon", "car-hatchback", "van",
              "car-suv", "bus", "car-saloon", "car-hatchback"][:p.queue_vehicles]
     ms = [_vehicle(n) for n in names]
-    enter = t_stop - 14.0 + np.cumsum(rng.uniform(1.5, 2.5, len(ms)))  # they reach the line while the ego waits
-    runs = lane_traffic(lane, [m.length_m for m in ms], np.full(len(ms), 8.0), -5.0, duration + 5.0,
+    # they enter 60 m behind the ego's start, some 20 s before they reach the line: while the ego waits
+    enter = t_stop - 22.0 + np.cumsum(rng.uniform(1.5, 2.5, len(ms)))
+    runs = lane_traffic(lane, [m.length_m for m in ms], np.full(len(ms), 8.0), enter[0] - 1.0, duration + 5.0,
                         (Signal(float(line), ((-100.0, t_go),)),), rng=rng, enter_s=enter)
     return [Actor(m, lane, prof, OffsetProfile(), "queue", span) for m, (prof, span) in zip(ms, runs, strict=False)]
 

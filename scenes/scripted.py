@@ -64,19 +64,25 @@ class ProfiledTrajectory:
 
     def pose_at(self, times) -> np.ndarray:
         t = np.atleast_1d(np.asarray(times, float))
-        s = self.distance_at(t)
+        inside = (t >= 0) & (t <= self._duration)
+        state = np.stack([self.distance_at(t), np.where(inside, self.profile.accel(t), 0.0)], 1)
+        # one pose per distinct (distance, acceleration): a standing vehicle's poses are equal to the last bit
+        # (numpy's vectorised sines may round an element differently by its place in the array)
+        state, back = np.unique(state, axis=0, return_inverse=True)
+        return self._poses(state[:, 0], state[:, 1])[back.ravel()]
+
+    def _poses(self, s: np.ndarray, accel: np.ndarray) -> np.ndarray:
         p, tan, left, grade = self.lane.frame(s)
         yaw = np.arctan2(tan[:, 1], tan[:, 0])
-        inside = (t >= 0) & (t <= self._duration)
-        pitch = -np.arctan(grade) - PITCH_PER_ACCEL_RAD * np.where(inside, self.profile.accel(t), 0.0)
-        roll = np.zeros(len(t))
+        pitch = -np.arctan(grade) - PITCH_PER_ACCEL_RAD * accel
+        roll = np.zeros(len(s))
         if self.surface_height is not None:
             half = 0.8
             zl = self.surface_height(*(p[:, :2] + half * left).T)
             zr = self.surface_height(*(p[:, :2] - half * left).T)
             roll = np.arctan2(zl - zr, 2 * half)
         cy, sy, cp, sp, cr, sr = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
-        T = np.tile(np.eye(4), (len(t), 1, 1))
+        T = np.tile(np.eye(4), (len(s), 1, 1))
         T[:, 0, 0], T[:, 0, 1], T[:, 0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
         T[:, 1, 0], T[:, 1, 1], T[:, 1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
         T[:, 2, 0], T[:, 2, 1], T[:, 2, 2] = -sp, cp * sr, cp * cr
