@@ -78,22 +78,28 @@ class ParamError(ValueError):
     Subclasses (``SensorError``, ``SpecError``) keep the same shape.
     """
 
-    def __init__(self, problem: str, key: str | None = None, origin: str | None = None):
-        self.problem, self.key, self.origin = problem, key, origin
+    def __init__(self, problem: str, key: str | None = None, origin: str | None = None,
+                 suggestion: str | None = None):
+        self.problem, self.key, self.origin, self.suggestion = problem, key, origin, suggestion
         text = problem if key is None else f"key '{key}' {problem}"
         super().__init__(text if origin is None else f"{origin}: {text}")
 
     def at(self, origin: str | None) -> ParamError:
         """The same error, said of ``origin`` (a file, a scene, a sensor: it replaces the one it had)."""
-        return type(self)(self.problem, self.key, origin)
+        return type(self)(self.problem, self.key, origin, self.suggestion)
 
     def within(self, key: str) -> ParamError:
-        """The same error one section down: its key becomes ``key.<its key>``."""
-        return type(self)(self.problem, key if self.key is None else f"{key}.{self.key}", self.origin)
+        """The same error one section down: its key becomes ``key.<its key>``, and so does the name it
+        suggests (``did you mean 'filter.voxel_size_m'?``: the whole key, to be given as it is)."""
+        problem, suggestion = self.problem, self.suggestion
+        if suggestion is not None:
+            problem = problem.replace(f"did you mean '{suggestion}'", f"did you mean '{key}.{suggestion}'", 1)
+            suggestion = f"{key}.{suggestion}"
+        return type(self)(problem, key if self.key is None else f"{key}.{self.key}", self.origin, suggestion)
 
     def as_(self, error: type[ParamError]) -> ParamError:
         """The same error as another class of ``ParamError`` (a section's own)."""
-        return self if type(self) is error else error(self.problem, self.key, self.origin)
+        return self if type(self) is error else error(self.problem, self.key, self.origin, self.suggestion)
 
 
 # ---------------------------------------------------------------- one key
@@ -347,7 +353,7 @@ class Section:
             if key not in self.names:
                 moved = self.moved(str(key))
                 raise ParamError(f"is unknown; did you mean '{moved}'?" if moved else unknown(str(key), self.names),
-                                 str(key))
+                                 str(key), suggestion=moved or closest(str(key), self.names))
         for m in self.members:
             if isinstance(m, Param) and m.required and m.name not in data and not partial:
                 raise ParamError(f"is missing ({m.help})" if m.help else "is missing", m.name)
@@ -391,13 +397,20 @@ def _switch(sec: Section) -> bool:
     return "enabled" in sec.names and getattr(sec["enabled"], "type", None) == "bool"
 
 
-def unknown(key: str, names: Iterable[str]) -> str:
-    """The problem of an unknown key: the closest known name, if one is close, and the known ones."""
+def closest(key: str, names: Iterable[str]) -> str | None:
+    """The known name an unknown ``key`` most likely means, or None when none is close."""
     names = list(names)
     # A unit suffix left out ('speed' for speed_m_s) is the commonest slip; then the closest spelling.
     close = [key + suffix for suffix, _ in UNIT_SUFFIXES if key + suffix in names][:1] or difflib.get_close_matches(
         key, names, n=1, cutoff=0.6)
-    hint = f"; did you mean '{close[0]}'?" if close else ""
+    return close[0] if close else None
+
+
+def unknown(key: str, names: Iterable[str]) -> str:
+    """The problem of an unknown key: the closest known name, if one is close, and the known ones."""
+    names = list(names)
+    close = closest(key, names)
+    hint = f"; did you mean '{close}'?" if close else ""
     return f"is unknown{hint} (known: {', '.join(names)})"
 
 

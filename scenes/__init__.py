@@ -20,9 +20,12 @@ from types import ModuleType
 from typing import Any
 
 from . import (
+    bare_tunnel,
+    bridge,
     canyon,
     city,
     forest,
+    garage,
     highway,
     lead_vehicle,
     open_field,
@@ -46,6 +49,9 @@ SCENES: dict[str, ModuleType] = {
     "forest": forest,
     "suburb": suburb,
     "canyon": canyon,
+    "garage": garage,
+    "bridge": bridge,
+    "bare-tunnel": bare_tunnel,
     "red_light": red_light,
     "traffic_jam": traffic_jam,
     "overtaking_lorry": overtaking_lorry,

@@ -52,6 +52,7 @@ class Params(CommonParams):
     land_roughness_m: float = param(3.0, "standard deviation of the land's relief", min=0.0, max=30.0)
     tree_groups: int = param(25, "groups of trees scattered in the land", min=0, max=1000)
     rail_post_spacing_m: float = param(4.0, "spacing of the guard rails' posts (0: a bare beam)", min=0.0, max=100.0)
+    written_when_set = (*CommonParams.written_when_set, "rail_post_spacing_m")  # added with the stress scenes
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -128,6 +129,7 @@ def build(p: Params) -> Scene:
     traj = PathTrajectory(
         path, False, p.speed_m_s, p.accel_m_s2, p.lateral_accel_m_s2, p.mount_height_m,
         np.radians(p.suspension_pitch_deg), p.suspension_heave_m, p.seed,
+        accel_smoothing_s=p.accel_smoothing_s,
     )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()

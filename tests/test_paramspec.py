@@ -186,7 +186,8 @@ def test_null_is_a_value_in_command_line_text_where_the_key_allows_it():
         ({"name": "a", "speed": 3}, "d.yaml: key 'speed' is unknown; did you mean 'speed_m_s'? (known: name, frames,"),
         ({"name": "a", "frame": 3}, "d.yaml: key 'frame' is unknown; did you mean 'frames'?"),
         ({"name": "a", "colour": 3}, "d.yaml: key 'colour' is unknown (known: name, frames, speed_m_s, ratio, seeds,"),
-        ({"name": "a", "stage": {"enable": 1}}, "d.yaml: key 'stage.enable' is unknown; did you mean 'enabled'? "
+        ({"name": "a", "stage": {"enable": 1}}, "d.yaml: key 'stage.enable' is unknown; did you mean "
+                                                "'stage.enabled'? "
                                                 "(known: enabled, max_normal_std_deg, model)"),
         # missing, wrong type, null where not allowed
         ({}, "d.yaml: key 'name' is missing (a required name)"),

@@ -70,7 +70,7 @@ def tiny_sweep(tmp_path_factory):
         ({"scene_params": {"city": {"seed": 3}}}, "scene_params.city.seed", "axis"),
         ({"odometry": {"voxel_size": 0.3}}, "odometry.voxel_size", "unknown"),
         ({"odometry": {"filter": {"voxel_size_m": -1}}}, "odometry.filter.voxel_size_m", "> 0"),
-        ({"odometry": {"voxel_size_m": 0.5}}, "odometry.voxel_size_m", "did you mean 'filter.voxel_size_m'?"),
+        ({"odometry": {"voxel_size_m": 0.5}}, "odometry.voxel_size_m", "did you mean 'odometry.filter.voxel_size_m'?"),
         ({"odometry": {"clean": {"min_range_m": 200}}}, "odometry.clean.min_range_m", "< clean.max_range_m"),
         ({"configs": {"v4": {"match": {"trim_fraction": 1}}}}, "configs.v4.match.trim_fraction", "[0, 1)"),
         ({"commands": {"mine": "my_odometry {sequence}"}}, "commands.mine", "{out}"),

@@ -228,6 +228,11 @@ def _plane_axes(T_gt: np.ndarray, plane: str) -> tuple[int, int]:
     return keep[0], keep[1]
 
 
+def metres_text(value: float) -> str:
+    """A length for a title: whole metres from 10 m on, two significant figures below (0.59 m, not 1 m)."""
+    return f"{value:.0f} m" if value >= 10 else f"{value:.2g} m"
+
+
 def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title: str = "",
                     truth_weak: np.ndarray | None = None, own_weak: np.ndarray | None = None) -> None:
     """Write a PNG: top-down trajectories, KITTI translation / rotation error per segment length, and the
@@ -261,7 +266,7 @@ def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title
     ax_traj.set_aspect("equal", adjustable="datalim")
     ax_traj.set_xlabel(f"{names[i]} [m]")
     ax_traj.set_ylabel(f"{names[j]} [m]")
-    ax_traj.set_title(f"trajectory, top view ({metrics.path_length_m:.0f} m, {metrics.frames} frames)")
+    ax_traj.set_title(f"trajectory, top view ({metres_text(metrics.path_length_m)}, {metrics.frames} frames)")
     ax_traj.grid(True, alpha=0.3)
     ax_traj.legend(loc="best")
 
@@ -279,7 +284,7 @@ def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title
             ax.text(
                 0.5, 0.5,
                 f"no segment of {min(metrics.lengths_m):g} m or more:\n"
-                f"ground-truth path is {metrics.path_length_m:.1f} m",
+                f"ground-truth path is {metres_text(metrics.path_length_m)}",
                 ha="center", va="center", transform=ax.transAxes,
             )
             ax.set_xlim(0, max(metrics.lengths_m) + 100)
@@ -310,5 +315,6 @@ def plot_evaluation(path: Path, T_gt, T_est, metrics, plane: str = "auto", title
         raise DatasetError(f"{path}: cannot write the plot ({exc.strerror})") from None
 
 
-__all__ = ["PLANES", "Trajectory", "evaluation_notes", "format_table", "frame_mixup", "load_pair", "plot_evaluation",
+__all__ = ["PLANES", "Trajectory", "evaluation_notes", "format_table", "frame_mixup", "load_pair", "metres_text",
+           "plot_evaluation",
            "read_trajectory"]

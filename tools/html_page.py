@@ -18,7 +18,7 @@ MARKDOWN_IMAGE = re.compile(r"!\[([^\]]*)\]\(([^)\s]+)\)")
 
 
 def _inline(text: str, img) -> str:
-    """Inline Markdown (images, bold, code) to HTML; ``img(src, alt)`` renders an image."""
+    """Inline Markdown (images, links, bold, code) to HTML; ``img(src, alt)`` renders an image."""
     out, pos = [], 0
     for m in MARKDOWN_IMAGE.finditer(text):
         out.append(_inline_plain(text[pos:m.start()]))
@@ -32,6 +32,7 @@ def _inline_plain(text: str) -> str:
     s = html.escape(text, quote=False)
     s = re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
     s = re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", s)
+    s = re.sub(r"\[([^\]]+)\]\(([^)\s]+)\)", r'<a href="\2">\1</a>', s)  # a link (images are taken before)
     s = re.sub(r"(?<![\w*])\*([^*\s][^*]*)\*(?![\w*])", r"<em>\1</em>", s)
     return s
 

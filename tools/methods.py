@@ -227,10 +227,12 @@ def run_command(template: str, staged, log_path: str | Path, timeout_s: float = 
                 workdir: str | Path | None = None) -> float:
     """Run an external odometry over a staged input through the shell; its output goes to ``log_path``.
 
-    workdir: where it runs (default: here). Returns its wall time, s. Raises
-    MethodError (quoting the command's last lines) on a non-zero exit, a timeout or
-    no poses written.
+    workdir: where it runs (default: the stage's empty ``work`` folder, ``tools.isolation``).
+    Returns its wall time, s. Raises MethodError (quoting the command's last lines) on a non-zero
+    exit, a timeout or no poses written.
     """
+    from tools.isolation import method_environment
+
     command = fill_command(template, staged.placeholders())
     staged.out.unlink(missing_ok=True)
     log_path = Path(log_path)
@@ -238,19 +240,35 @@ def run_command(template: str, staged, log_path: str | Path, timeout_s: float = 
     with open(log_path, "w") as log_file:
         log_file.write(f"$ {command}\n")
         log_file.flush()
-        cwd = workdir if workdir is not None and Path(workdir).is_dir() else None
+        cwd = workdir if workdir is not None and Path(workdir).is_dir() else staged.workdir
         try:
             proc = subprocess.run(command, shell=True, cwd=cwd, stdout=log_file, stderr=subprocess.STDOUT,
-                                  timeout=timeout_s, stdin=subprocess.DEVNULL)
+                                  timeout=timeout_s, stdin=subprocess.DEVNULL, env=method_environment(cwd))
         except subprocess.TimeoutExpired:
             raise MethodError(f"external odometry timed out after {timeout_s:g} s: {command}") from None
     seconds = time.perf_counter() - t0
     if proc.returncode != 0:
         tail = " | ".join(log_path.read_text().strip().splitlines()[-3:])
-        raise MethodError(f"external odometry exited with status {proc.returncode}: {tail}")
+        raise MethodError(f"external odometry exited with status {proc.returncode}: {tail}"
+                          + _relative_paths_hint(template, cwd))
     if not staged.out.is_file():
         raise MethodError(f"external odometry wrote no poses to {{out}} (command: {command})")
     return seconds
+
+
+def _relative_paths_hint(template: str, cwd) -> str:
+    """A hint when the command names files by paths relative to the caller's folder, which it does not run in."""
+    here = Path.cwd()
+    try:
+        words = shlex.split(re.sub(r"\{\w+\}", "", template))
+    except ValueError:  # unbalanced quotes: the shell said what it had to
+        return ""
+    relative = [w for w in words if not w.startswith(("/", "-", "~")) and "/" in w and (here / w).exists()
+                and not (Path(cwd) / w).exists()]
+    if not relative:
+        return ""
+    return (f" (the command runs in a folder of its own, {cwd}, not in {here}: give {relative[0]} by an absolute "
+            "path)")
 
 
 class CommandMethod(Method):
@@ -309,7 +327,8 @@ def plugin_entry_points() -> dict:
     return {ep.name: ep for ep in entry_points(group=PLUGIN_GROUP)}
 
 
-def _load_plugin(entry_point) -> Method:
+def load_plugin(entry_point) -> Method:
+    """The ``Method`` an entry point of ``PLUGIN_GROUP`` names (a function becomes a ``FunctionMethod``)."""
     try:
         obj = entry_point.load()
     except Exception as exc:  # noqa: BLE001 - any import error of a third-party package: say which
@@ -317,12 +336,15 @@ def _load_plugin(entry_point) -> Method:
                           f"{type(exc).__name__}: {exc}") from None
     version = entry_point.dist.version if getattr(entry_point, "dist", None) is not None else None
     if isinstance(obj, Method):
-        return obj
-    if isinstance(obj, type) and issubclass(obj, Method):
-        return obj()
-    if callable(obj):
-        return FunctionMethod(entry_point.name, obj, entry_point.value, version)
-    raise MethodError(f"plug-in {entry_point.name} ({entry_point.value}) is neither a function nor a Method")
+        method = obj
+    elif isinstance(obj, type) and issubclass(obj, Method):
+        method = obj()
+    elif callable(obj):
+        method = FunctionMethod(entry_point.name, obj, entry_point.value, version)
+    else:
+        raise MethodError(f"plug-in {entry_point.name} ({entry_point.value}) is neither a function nor a Method")
+    method.entry_point = entry_point.name  # run_method runs it in a process of its own (tools.isolation)
+    return method
 
 
 # ---------------------------------------------------------------- names
@@ -371,7 +393,7 @@ def method_from_name(name: str, overrides: dict | None = None) -> Method:
         return PeerMethod(name)
     plugins = plugin_entry_points()
     if name in plugins:
-        return _load_plugin(plugins[name])
+        return load_plugin(plugins[name])
     known = known_names()
     listing = "; ".join(f"{kind}: {', '.join(names) or '(none installed)'}" for kind, names in known.items())
     raise MethodError(f"unknown method {name!r} ({listing}; an external program: a command with {{scans}} and "
@@ -386,8 +408,9 @@ def run_method(method: Method, sequence, *, stage: bool = True, frames: slice | 
 
     stage: hand the method the sensor's data only (``tools.staging``, no ground truth): a sequence
     in memory goes to an in-process method as ``sensor_view`` (nothing written), anything else is
-    staged on disk with the per-point ``fields`` (default ``DEFAULT_FIELDS``). False: an in-process
-    method reads ``sequence`` as it is (``salo odometry`` on the user's data; a view already
+    staged on disk with the per-point ``fields`` (default ``DEFAULT_FIELDS``); a plug-in of
+    ``PLUGIN_GROUP`` runs on its staged copy in a process of its own (``tools.isolation``). False:
+    an in-process method reads ``sequence`` as it is (``salo odometry`` on the user's data; a view already
     without the truth); a command is staged either way. frames: which frames (in-process methods
     only; default all). on_frame(k, diagnostics or None) after each frame. workdir, log_path,
     timeout_s: a command's (``run_command``). keep_failures: a method other than ours that cannot
@@ -413,6 +436,17 @@ def run_method(method: Method, sequence, *, stage: bool = True, frames: slice | 
     reason = method.unavailable()
     if reason:
         raise MethodError(f"{method.label}: {reason}")
+    if getattr(method, "entry_point", None) is not None:  # a plug-in: in a process of its own
+        from tools.isolation import IsolatedRunError, run_plugin_isolated
+
+        with staged(sequence, DEFAULT_FIELDS if fields is None else fields) as stage_dir:
+            try:
+                got = run_plugin_isolated(method.entry_point, method.name, stage_dir, log_path=log_path,
+                                          timeout_s=timeout_s)
+            except IsolatedRunError as exc:
+                raise MethodError(str(exc)) from None
+        return MethodRun(method.name, got.poses, got.seconds, note=got.note, settings=got.settings,
+                         degenerate=got.degenerate)
     in_process = type(method).run_sequence is not Method.run_sequence
     fields = DEFAULT_FIELDS if fields is None else fields
     if in_process and not stage:
@@ -424,8 +458,7 @@ def run_method(method: Method, sequence, *, stage: bool = True, frames: slice | 
                                  on_frame=on_frame, **_chosen(frames))
 
 
-
 __all__ = ["DEFAULT_COMMAND_TIMEOUT_S", "LABELS", "PLACEHOLDERS", "PLUGIN_GROUP", "CommandMethod", "FunctionMethod",
            "Method", "MethodError", "OursMethod", "PeerMethod", "builtin_names", "check_command", "command_problem",
-           "fill_command", "known_names", "method_from_name", "method_label", "our_config", "plugin_entry_points",
-           "run_command", "run_method"]
+           "fill_command", "known_names", "load_plugin", "method_from_name", "method_label", "our_config",
+           "plugin_entry_points", "run_command", "run_method"]

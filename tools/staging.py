@@ -6,15 +6,21 @@ run by ``salo regress`` or ``salo bench`` gets a *staged* copy instead, a folder
 of its own outside the sequence's::
 
     STAGE/input/                 {sequence}
-      velodyne/NNNNNN.bin        {scans}: float32 x y z intensity, as measured (hard links, else copies)
+      velodyne/NNNNNN.bin        {scans}: float32 x y z intensity, as measured (copies)
       times.txt                  {times}: sweep start per frame, s
       sensor.yaml                {sensor}: the sensor model (without its weather: a real sensor does not report it)
       fields/NNNNNN.npy          per-point fields the run opts into (``SENSOR_FIELDS``), one array per scan
+      imu.csv                    the IMU's samples, when the sequence has an IMU (not their truth)
     STAGE/output/poses.txt       {out}: where the method writes its KITTI poses
+    STAGE/work/                  where a method's process runs (its working folder), empty at the start
 
-No file there is a link to the sequence (hard links share the data, not the
-path; a symbolic link would lead back with ``..``), so ``cp {sequence}/poses.txt
-{out}`` finds nothing to copy. The per-point fields are what a lidar driver
+Every file there is a copy of its own: no symbolic link (it would name the
+sequence's folder) and no hard link (another name of the same file, which
+``find -samefile`` finds beside ``poses.txt``), so nothing leads from what a
+method is handed to the truth. ``staged`` makes STAGE a fresh folder of the
+system's temporary folder, outside the run's output tree, removed after the run:
+``cp {sequence}/poses.txt {out}`` finds nothing to copy, and walking up from
+any path handed over finds no sequence folder. The per-point fields are what a lidar driver
 reports: ``ring``, ``time_s`` (s since the sweep start), ``azimuth_index``,
 ``range_m``; the truth fields (``TRUTH_FIELDS``) are refused. A sequence simulated
 without motion distortion gets no ``time_s``: its scans are instantaneous, as a
@@ -29,7 +35,6 @@ so nothing is written to disk for it.
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -46,7 +51,7 @@ SENSOR_FIELDS = ("ring", "time_s", "azimuth_index", "range_m")
 # The default: what the Velodyne driver's XYZIRT cloud carries besides x y z intensity.
 DEFAULT_FIELDS = ("ring", "time_s")
 # The simulator's truth: never handed to a method.
-TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather")
+TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather", "object_class", "moving", "velocity")
 
 
 class StagingError(DatasetError):
@@ -90,6 +95,11 @@ class StagedInput:
     frames: int
 
     @property
+    def workdir(self) -> Path:
+        """The folder a method's process runs in (empty when staged)."""
+        return self.root.parent / "work"
+
+    @property
     def scans(self) -> Path:
         return self.root / "velodyne"
 
@@ -108,11 +118,9 @@ class StagedInput:
 
 
 def _place(src: Path, dst: Path) -> None:
-    """A hard link (same data, no path back), else a copy."""
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copyfile(src, dst)
+    """A copy of its own (never a link: a hard link is another name of the sequence's file, one
+    ``find -samefile`` leads back to the folder holding the truth)."""
+    shutil.copyfile(src, dst)
 
 
 def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedInput:
@@ -130,6 +138,7 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
     root, out_dir = folder / "input", folder / "output"
     (root / "velodyne").mkdir(parents=True)
     out_dir.mkdir()
+    (folder / "work").mkdir()
     scan_files = getattr(sequence, "scan_files", None)
     staged_fields: set[str] = set()
     for k in range(len(sequence)):
@@ -155,12 +164,17 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
     else:
         (root / "sensor.yaml").write_text(sequence.sensor.clear_air().to_yaml())
     (root / "times.txt").write_text(format_times(sweep_start_times(sequence)))
+    imu = getattr(sequence, "imu", None)
+    if imu is not None:
+        from simlidar.formats.imu_csv import IMU_FILE, format_imu_csv
+
+        (root / IMU_FILE).write_text(format_imu_csv(imu))
     return StagedInput(root, out_dir / "poses.txt", tuple(f for f in fields if f in staged_fields), len(sequence))
 
 
 def sensor_view(sequence, fields=DEFAULT_FIELDS):
     """What ``stage_input`` would hand over, kept in memory: an in-memory sequence
-    (``simlidar.in_memory.InMemorySequence``) without poses, truth figures or manifest,
+    (``simlidar.in_memory.InMemorySequence``) without poses, truth figures, the IMU's truth or manifest,
     its per-point fields cut to ``fields`` (less ``time_s`` without motion distortion),
     its sensor without the weather.
 
@@ -170,7 +184,7 @@ def sensor_view(sequence, fields=DEFAULT_FIELDS):
 
     fields = _fields_to_hand_over(sequence, fields)
     return replace(sequence, fields=[_sensor_record(r, fields) for r in sequence.fields], poses=None,
-                   degeneracy=[], manifest={}, sensor=sequence.sensor.clear_air())
+                   degeneracy=[], manifest={}, imu_truth=None, sensor=sequence.sensor.clear_air())
 
 
 def _fields_to_hand_over(sequence, fields) -> tuple[str, ...]:
@@ -197,7 +211,8 @@ def _sensor_record(record: np.ndarray | None, fields: tuple[str, ...]) -> np.nda
 
 @contextmanager
 def staged(sequence, fields=DEFAULT_FIELDS, parent: str | Path | None = None) -> Iterator[StagedInput]:
-    """``stage_input`` into a fresh temporary folder (under ``parent``, default the system's), removed after."""
+    """``stage_input`` into a fresh temporary folder (under ``parent``, default the system's: outside any run's
+    output folder), removed after."""
     folder = Path(tempfile.mkdtemp(prefix="salo-input-", dir=parent))
     try:
         yield stage_input(sequence, folder, fields)

@@ -57,6 +57,13 @@ def _unoccluded_camera(vertices, faces, target: np.ndarray, offset: np.ndarray) 
     return target + offset
 
 
+def marker_radius_m(vertices: np.ndarray) -> float:
+    """The overview's scan-position marker: 2 % of the world's larger horizontal extent (vertices (V, 3), m),
+    so that it shows in a city and covers no room."""
+    extent = np.ptp(np.asarray(vertices)[:, :2], axis=0).max() if len(vertices) else 1.0
+    return float(0.02 * max(extent, 1.0))
+
+
 def render_scene(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -113,7 +120,7 @@ def render_scene(
         fwd = T_world_lidar[:3, 0]
         fwd_h = fwd - np.array([0.0, 0.0, fwd[2]])
         fwd_h /= max(np.linalg.norm(fwd_h), 1e-9)
-        pl.add_mesh(pv.Sphere(radius=0.25, center=origin), color="magenta")
+        pl.add_mesh(pv.Sphere(radius=min(0.25, 0.5 * marker_radius_m(vertices)), center=origin), color="magenta")
         camera = _unoccluded_camera(vertices, faces, origin, -45.0 * fwd_h + np.array([0.0, 0.0, 28.0]))
         pl.camera.position = tuple(camera)
         pl.camera.focal_point = tuple(origin + 25.0 * fwd_h)
@@ -131,7 +138,7 @@ def render_scene(
     pl.add_mesh(pv.lines_from_points(flat), color="red", line_width=3)
     if T_world_lidar is not None:
         mark = np.array([*T_world_lidar[:2, 3], top + 1.0])
-        pl.add_mesh(pv.Sphere(radius=max(4.0, 0.006 * np.ptp(vertices[:, 0])), center=mark), color="magenta")
+        pl.add_mesh(pv.Sphere(radius=marker_radius_m(vertices), center=mark), color="magenta")
     pl.view_xy()
     pl.enable_parallel_projection()
     pl.reset_camera()
@@ -339,5 +346,6 @@ def _models(scene, tracks: np.ndarray) -> list:
     return [scene.actors[int(i) - len(scene.object_labels)].model for i in tracks["object_id"]]
 
 
-__all__ = ["View", "ViewError", "actor_meshes", "box_corners", "draw_view", "pick_frame", "render_scene", "scene_view",
+__all__ = ["View", "ViewError", "actor_meshes", "box_corners", "draw_view", "marker_radius_m", "pick_frame",
+           "render_scene", "scene_view",
            "sequence_view"]

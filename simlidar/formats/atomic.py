@@ -166,7 +166,7 @@ class StagedFolder:
         self.out = Path(out)
         self.error = error
         if self.out.exists() and not force:
-            raise error(f"{self.out}: already exists (use --force to replace it)")
+            raise error(f"{self.out}: already exists (replace it with --force, or force=True in Python)")
         self.path = self.out.parent / f".{self.out.name}.partial-{os.getpid()}"
         self.removed_stale: list[Path] = []
         self.committed = False

@@ -21,7 +21,8 @@ def add_commands(sub) -> None:
         "truth): a method is one of ours (bl, ncf, salo, bl-map, ncf-map, salo-map, default; --set changes "
         "them), a peer (kiss-icp, genz-icp, small-gicp), an installed plug-in (entry-point group "
         "salo.methods) or a command (--command NAME=CMD with {scans}, {sensor}, {times}, {fields}, "
-        "{sequence}, {out}).",
+        "{sequence}, {out}). Each sequence also gets a 3D page, OUT/views/SEQUENCE.html (the scans frame by "
+        "frame, the trajectories, the error along the path; offline, one file), linked from the leaderboard.",
     )
     p.add_argument("--suite", default="regress",
                    help="regress (the regression suite: city, forest, highway), generalize (the held-out "
@@ -45,6 +46,11 @@ def add_commands(sub) -> None:
     p.add_argument("--rerun", action="append", default=[], metavar="NAME",
                    help="redo this method's stored results (repeatable)")
     p.add_argument("--out", type=Path, help="output folder (default out/bench/<suite name>)")
+    p.add_argument("--no-views", dest="views", action="store_false",
+                   help="do not write the 3D page of each sequence (OUT/views/SEQUENCE.html, linked from the "
+                   "leaderboard)")
+    p.add_argument("--view-points", type=whole_number(1000), metavar="N",
+                   help="at most N points a frame on the 3D pages (default: every point)")
     p.add_argument("--timeout", type=real_number(0.0, above=True), default=3600.0, metavar="S",
                    help="time limit of a command per sequence, s (default 3600)")
     p.set_defaults(func=cmd_bench)
@@ -85,12 +91,16 @@ def cmd_bench(args) -> int:
     try:
         result = run_bench(suite, methods, out, fields=fields, frames=args.frames, families=families,
                            rerun=tuple(args.rerun), timeout_s=args.timeout, command=shlex.join(["salo", *args.argv]),
-                           on_event=lambda text: print(text, file=sys.stderr, flush=True))
+                           on_event=lambda text: print(text, file=sys.stderr, flush=True), views=args.views,
+                           view_max_points=args.view_points)
     except SuiteError as exc:
         raise CommandError(str(exc)) from None
     print(f"{len(result.sequences)} sequences x {len(methods)} methods: {result.ran} runs, {result.reused} reused, "
           f"{result.seconds:.0f} s")
     print(f"leaderboard: {result.outputs['html']} (Markdown: {result.outputs['markdown']})")
+    views = [v for k, v in result.outputs.items() if k.startswith("view ")]
+    if views:
+        print(f"3D views: {len(views)} pages in {views[0].parent}")
     for r in result.failures:
         print(f"  failed: {r['label']} on {r['sequence']}: {r['error']}")
     return 0

@@ -89,17 +89,26 @@ def real_number(minimum: float = -math.inf, above: bool = False) -> Callable[[st
 
 
 # ---------------------------------------------------------------- parsers
-def parse_frames(text: str | None) -> slice | None:
-    """``--frames A:B`` (a Python slice; ``N`` alone is frame N) -> a slice, or None for all."""
+def parse_frames(text: str | None, n: int | None = None, where: str = "the sequence") -> slice | None:
+    """``--frames A:B`` or ``A:B:STEP`` (a Python slice; ``N`` alone is frame N) -> a slice, or None for all.
+
+    n: the sequence's frame count, when known: a range that selects none of them is refused,
+    naming ``where``. Raises CommandError (one line) for text that is not a range or a zero step.
+    """
     if not text:
         return None
     try:
-        parts = [int(x) if x else None for x in text.split(":")]
+        parts = [int(x) if x.strip() else None for x in text.split(":")]
     except ValueError:
-        raise CommandError(f"--frames {text!r}: expected A:B with integers") from None
-    if len(parts) == 1:
-        return slice(parts[0], parts[0] + 1)
-    return slice(*parts[:3])
+        raise CommandError(f"--frames {text!r}: expected A:B (or A:B:STEP) with whole numbers") from None
+    if len(parts) > 3:
+        raise CommandError(f"--frames {text!r}: expected A:B (or A:B:STEP) with whole numbers")
+    if len(parts) == 3 and parts[2] == 0:
+        raise CommandError(f"--frames {text!r}: the step must not be zero")
+    frames = slice(parts[0], parts[0] + 1 if parts[0] != -1 else None) if len(parts) == 1 else slice(*parts)
+    if n is not None and frames_selected(n, frames) == 0:
+        raise CommandError(f"--frames {text!r}: selects no frame of {where} (frames 0..{n - 1})")
+    return frames
 
 
 def frames_selected(n: int, frames: slice | None) -> int:

@@ -21,13 +21,15 @@ def add_commands(subparsers) -> None:
     p = subparsers.add_parser(
         "evaluate",
         help="error metrics of estimated poses against ground truth (KITTI, 100 m, ATE, RPE)",
-        description="Compare an estimated trajectory with ground truth, both KITTI pose files "
-        "(12 numbers per line, one line per frame, same number of frames). Reports the KITTI "
+        description="Compare an estimated trajectory with ground truth: pose files in KITTI (12 numbers a line, "
+        "one line per frame) or TUM (timestamp tx ty tz qx qy qz qw) format, each read as what it is (and "
+        "said which). Poses pair line by line (one estimated pose per ground-truth frame); two TUM files of "
+        "different lengths pair by time stamp. Reports the KITTI "
         "devkit's relative error (segments of 100..800 m along the ground-truth path, first "
-        "frames every 10th frame; translation in %%, rotation in deg/100 m), the SALO paper's "
+        "frames every 10th frame; translation in percent, rotation in deg/100 m), the SALO paper's "
         "100 m variant (mean and standard deviation in m per 100 m), the absolute trajectory "
         "error (RMSE, m; as given and after a rigid SE(3) alignment) and the frame-to-frame "
-        "relative pose error. Reads KITTI and TUM (and says which); prints the weakly constrained frame "
+        "relative pose error. Prints the weakly constrained frame "
         "ranges of the truth and of the estimate's own diagnostics when they are known, and warns when the "
         "first motions disagree in a way that a lidar / camera frame mix-up explains.",
     )

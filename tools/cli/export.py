@@ -44,7 +44,7 @@ def cmd_export(args) -> int:
     if args.ascii and args.format != "pcd":
         raise CommandError("--ascii applies to --format pcd only")
     seq = open_sequence(args.sequence, sensor=args.sensor, topic=args.topic)
-    frames = parse_frames(args.frames)
+    frames = parse_frames(args.frames, len(seq), str(args.sequence))
     options: dict = {"force": args.force}
     if args.format == "rosbag":
         options.update(storage=args.storage, epoch_s=args.epoch, truth=args.truth)

@@ -37,6 +37,8 @@ def add_commands(sub) -> None:
     p.add_argument("--poses", type=Path, help="ground truth for a real KITTI sequence (camera-frame poses file)")
     p.add_argument("--out", type=Path, help="output poses file (default: out/<sequence name>/<variant>/poses.txt)")
     p.add_argument("--tum", action="store_true", help="also write poses in TUM format (poses.tum)")
+    p.add_argument("--force", action="store_true", help="replace an existing output (the poses file and those "
+                   "beside it)")
     p.add_argument("--kitti-correction", action="store_true",
                    help="correct KITTI HDL-64E's 0.205 deg vertical-angle error on reading")
     p.set_defaults(func=cmd_odometry)
@@ -82,15 +84,20 @@ def cmd_odometry(args) -> int:
         from simlidar.formats.scan_folders import KITTI_SENSOR
 
         print(f"sensor: {KITTI_SENSOR} (KITTI's; --sensor to change)")
-    frames = parse_frames(args.frames)
+    frames = parse_frames(args.frames, len(seq), str(args.sequence))
     out = args.out or Path("out") / args.sequence.resolve().name / config.name / "poses.txt"
     files = RunFiles.beside(out, tum=args.tum)
+    existing = [p for p in (files.poses, files.diagnostics, files.config, files.tum) if p is not None and p.exists()]
+    if existing and not args.force:
+        raise CommandError(f"{existing[0]}: already exists (use --force to replace it"
+                           + (f" and {len(existing) - 1} more beside it" if len(existing) > 1 else "") + ")")
     bar = progress_bar(frames_selected(len(seq), frames), "frame", f"odometry {config.name}")
     try:  # the user's own data, read as given (--sensor, --poses): nothing to stage
         result = run_method(OursMethod(config.name, config), seq, stage=False, frames=frames,
                             on_frame=lambda k, d: bar.update(1))
     except MethodError as exc:
-        raise CommandError(f"{args.sequence}: {exc}") from None
+        text = str(exc)  # the odometry's errors name the sequence already, most of them
+        raise CommandError(text if text.startswith(str(args.sequence)) else f"{args.sequence}: {text}") from None
     finally:
         bar.close()
     write_run_files(files, result.poses, result.diagnostics, config, result.odometry_run.times_s, seq.sensor)
@@ -104,7 +111,19 @@ def cmd_odometry(args) -> int:
               + (f", or the prior kept below {config.degeneracy.min_constraint_eigenvalue:g}"
                  if config.degeneracy.min_constraint_eigenvalue else "") + "):")
         for st in stretches[:20]:
-            print("    " + st.describe())
+            print("    " + flagged_by(st, result.diagnostics, config.degeneracy.degenerate_eigenvalue))
         if len(stretches) > 20:
             print(f"    ... {len(stretches) - 20} more stretches in {files.diagnostics}")
     return 0
+
+
+def flagged_by(stretch, diagnostics, threshold: float) -> str:
+    """A stretch's line, saying which clause flagged its frames: the eigenvalue below ``threshold``, the prior
+    kept (``remapped``), or both (so a stretch whose smallest eigenvalue is above the threshold reads right)."""
+    mine = [d for d in diagnostics if stretch.first <= d.frame <= stretch.last]
+    low = sum(bool(d.degenerate) for d in mine)
+    kept = sum(d.remapped > 0 for d in mine)
+    clauses = ([f"{low} frames below {threshold:g}"] if low else []) + ([f"prior kept on {kept}"] if kept else [])
+    span, _, rest = stretch.describe().partition(": ")
+    rest = rest.replace(f"; prior kept on {stretch.remapped} frames", "")
+    return f"{span} ({', '.join(clauses) or 'flagged'}): {rest}"

@@ -237,8 +237,9 @@ def cmd_regress(args) -> int:
             spec = method_suite_spec(methods, suite, commands, parse_config_set(args.set), fields)
         else:
             spec = suite_spec(suite)
-        if args.keep_sequences:
-            spec = replace(spec, keep_sequences=True, sequences="disk")
+        # regress simulates in memory and leaves no truth behind unless asked, whatever the suite's spec says
+        spec = replace(spec, keep_sequences=args.keep_sequences,
+                       sequences="disk" if args.keep_sequences else "memory")
         if methods:
             baselines = {m: args.baseline or method_baseline_path(m, spec.name, args.baseline_dir) for m in methods}
             documents = {}

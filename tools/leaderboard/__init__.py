@@ -67,12 +67,14 @@ class BenchResult:
 def run_bench(suite: str | Path, methods: list, out: str | Path, *, fields=None, frames: int | None = None,
               families: tuple[str, ...] = (), rerun: tuple[str, ...] = (), timeout_s: float = 3600.0,
               workdir: str | Path | None = None, command: str = "", on_event: Callable[[str], None] | None = None,
-              on_frame=None) -> BenchResult:
+              on_frame=None, views: bool = True, view_max_points: int | None = None) -> BenchResult:
     """Run ``methods`` (``tools.methods.Method``) over ``suite`` into ``out`` and write the leaderboard.
 
     fields: per-point fields handed to the methods (default ``tools.staging.DEFAULT_FIELDS``).
     rerun: method names whose stored results are redone. command: the command line, recorded.
     on_event(text) before each simulation and each run; on_frame(k, diagnostics) as methods run.
+    views: write a 3D page per sequence (``tools.view_html.bench_pages``, ``OUT/views/``; at most
+    ``view_max_points`` points a frame), linked from the leaderboard.
     Raises SuiteError when the suite cannot be simulated.
     """
     from tools.staging import DEFAULT_FIELDS
@@ -101,9 +103,16 @@ def run_bench(suite: str | Path, methods: list, out: str | Path, *, fields=None,
     history.append({"command": command, "started_utc": started, "seconds": round(seconds, 1),
                     "methods": [m.name for m in methods], "ran": ran, "reused": reused})
     atomic_write_text(out / HISTORY_FILE, json.dumps(history, indent=1) + "\n")
+    pages = {}
+    if views:
+        from tools.view_html import bench_pages
+
+        pages = bench_pages(out, [s.id for s in sequences], max_points=view_max_points,
+                            on_page=lambda name: say(f"writing the 3D view of {name}"))
     say("writing the leaderboard")
     shown, results = _on_page(out, methods, sequences)
-    outputs = write_leaderboard(out, str(suite), sequences, shown, results, history)
+    outputs = write_leaderboard(out, str(suite), sequences, shown, results, history, pages)
+    outputs.update({f"view {k}": v for k, v in pages.items()})
     history[-1]["total_s"] = round(time.perf_counter() - t0, 1)  # the page and its figures included
     atomic_write_text(out / HISTORY_FILE, json.dumps(history, indent=1) + "\n")
     return BenchResult(sequences, results, ran, reused, time.perf_counter() - t0, outputs)
@@ -140,10 +149,9 @@ def _on_page(out: Path, methods: list, sequences: list[BenchSequence]) -> tuple[
 
 
 def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], methods: list, results: list[dict],
-                      history: list) -> dict[str, Path]:
-    """The figures, ``leaderboard.md`` and ``leaderboard.html`` into ``out``."""
+                      history: list, pages: dict[str, Path] | None = None) -> dict[str, Path]:
+    """The figures, ``leaderboard.md`` and ``leaderboard.html`` into ``out``; pages: each sequence's 3D view."""
     from odometry.config import DEFAULT_VARIANT
-    from simlidar.dataset import open_sequence
     from tools.degenerate import TRUTH_THRESHOLD, diagnostics_constraints, truth_constraints
     from tools.html_page import html_page
 
@@ -161,14 +169,24 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
     lines += ["",
              "Every method ran on the sensor's data only (scans, per-point ring and time unless the kind says "
              "otherwise, the sensor model, times), without the ground truth. Figures are means over a family's "
-             "sequences: KITTI t_err and r_err over 50-200 m segments, the SE(3)-aligned ATE, the frame-to-frame "
-             "RPE, the vertical drift (|end height error| / distance); a failure is a failed run, a divergence "
-             "or t_err above 10 % (counted; its figures stay in the means when it has them). Best figure in bold.", ""]
+             "sequences: KITTI t_err and r_err over 50-200 m segments; beside t_err, the relative error over "
+             "10 m and 50 m windows (every frame a start, so short sequences have one too); the SE(3)-aligned "
+             "ATE, the frame-to-frame RPE, the vertical drift (|end height error| / distance); the error along "
+             "the truth's weakest direction over its weakly constrained stretches (accumulated over each "
+             "stretch, projected on its weakest direction, over the distance they span; n/a where the truth "
+             "has no weak stretch); the success rate: runs without a failure (a failed run, a divergence or "
+             "t_err above 10 %; a failed run's figures stay in the means when it has them). Best figure in "
+             "bold.", ""]
+    truths = _add_environment_figures(out, sequences, results)
     families = list(dict.fromkeys(s.family for s in sequences))
     for family in families:
         ids = {s.id for s in sequences if s.family == family}
         rows = family_rows([r for r in results if r["sequence"] in ids], methods)
         lines += [f"## {family}", "", table_markdown(rows), ""]
+        linked = [f"[{s.id}]({_link(out, pages[s.id])})" for s in sequences if s.family == family and s.id in
+                  (pages or {})]
+        if linked:
+            lines += ["3D views (scans, trajectories, error along the path): " + ", ".join(linked), ""]
     if str(suite) in ("stress", "traffic"):  # moving traffic: each sequence's end error and motion standing still
         from .standstill import motion_table
 
@@ -188,8 +206,7 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
               "the frames each method flagged itself (ours: degenerate or prior kept).", ""]
     outputs = {}
     for s in sequences:
-        seq = open_sequence(s.path)
-        gt = np.asarray(seq.poses)
+        gt = truths[s.id]
         est, own = {}, {}
         for m in methods:
             r = next((x for x in results if x["method"] == m.name and x["sequence"] == s.id), None)
@@ -207,6 +224,9 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
                                         None if truth is None else truth.weak, own,
                                         f"{s.id}: position error over distance")
         lines += [f"### {s.id}", ""]
+        if s.id in (pages or {}):
+            lines += [f"[Open the 3D view of {s.id}]({_link(out, pages[s.id])}): the scans frame by frame, the "
+                      "truth's and each method's trajectory, the error along the path.", ""]
         if truth is not None:
             figures.error_vs_eigenvalue_png(base / "error_vs_eigenvalue.png", gt, est, truth.t_eig0,
                                             TRUTH_THRESHOLD, f"{s.id}: per-frame error against the weakest "
@@ -225,6 +245,30 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
     atomic_write_text(out / "leaderboard.html", html_page(markdown, f"salo bench: {suite}", out))
     outputs.update(markdown=out / "leaderboard.md", html=out / "leaderboard.html")
     return outputs
+
+
+def _add_environment_figures(out: Path, sequences: list[BenchSequence], results: list[dict]) -> dict:
+    """Each finished result's ``environment`` figures, added to its figures (computed from its poses, so a
+    result stored by an earlier bench has them too); the true poses of each sequence, by id."""
+    from simlidar.dataset import open_sequence
+    from tools.degenerate import truth_constraints
+
+    from .environment import environment_figures
+
+    truths = {}
+    for s in sequences:
+        truths[s.id] = gt = np.asarray(open_sequence(s.path).poses)
+        stretches = truth_constraints(s.path).stretches() if (s.path / "degeneracy.csv").is_file() else None
+        for r in results:
+            if r["sequence"] == s.id and r["status"] == "ok":
+                est = _read_nan_poses(result_dir(out, r["method"], s.id) / "poses.txt")
+                r["figures"] = {**r["figures"], **environment_figures(gt, est, stretches)}
+    return truths
+
+
+def _link(out: Path, page: Path) -> str:
+    """A page's address relative to the leaderboard (which sits in ``out``)."""
+    return Path(page).relative_to(out).as_posix()
 
 
 def _read_nan_poses(path: Path) -> np.ndarray:

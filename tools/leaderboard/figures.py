@@ -85,7 +85,7 @@ def draw_error_over_distance(ax, strip, gt: np.ndarray, estimates: dict, truth_w
     ax.set_ylabel("position error, m (log)")
     ax.grid(True, which="major", alpha=0.3)
     handles, _ = ax.get_legend_handles_labels()
-    if truth_weak is not None:
+    if truth_weak is not None and np.any(truth_weak):  # the shade's entry only where something is shaded
         handles.append(Patch(color=shade, alpha=0.6, label="weak in the truth"))
     ax.legend(handles=handles, loc="upper left", fontsize=8.5, ncol=2, framealpha=0.9)
     rows = (["truth"] if truth_weak is not None else []) + list(own_weak)

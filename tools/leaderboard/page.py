@@ -2,10 +2,13 @@
 
 Per family and method, the figures are means over the family's sequences that the
 method ran: KITTI t_err (%) and r_err (deg / 100 m) over 50-200 m segments, the
-aligned ATE (m), the frame-to-frame RPE (cm), the vertical drift (|end height
-error| / distance, %), failures (a failed run, a divergence, or t_err above
-10 %; counted, and in the means unless the run gave no figure) and frames per
-second. Methods are ranked by t_err; the best figure is bold.
+relative error over 10 m and 50 m windows (%, ``environment``), the aligned ATE
+(m), the frame-to-frame RPE (cm), the vertical drift (|end height error| /
+distance, %), the error along the truth's weakest direction over its weak
+stretches (%, ``environment``; n/a where the truth has none), the success rate
+(runs without a failure: a failed run, a divergence, or t_err above 10 %; a
+failed run's figures stay in the means when it has them) and frames per second.
+Methods are ranked by failures, then t_err; the best figure is bold.
 """
 
 from __future__ import annotations
@@ -14,9 +17,10 @@ import math
 
 import numpy as np
 
-COLUMNS = (("t_err_pct", "t_err %", ".2f"), ("r_err_deg_per_100m", "r_err deg/100 m", ".3f"),
+COLUMNS = (("t_err_pct", "t_err %", ".2f"), ("rel_10m_pct", "10 m window %", ".2f"),
+           ("rel_50m_pct", "50 m window %", ".2f"), ("r_err_deg_per_100m", "r_err deg/100 m", ".3f"),
            ("ate_aligned_m", "ATE m", ".3f"), ("rpe_t_cm", "RPE cm", ".2f"),
-           ("vertical_drift_pct", "vertical drift %", ".2f"))
+           ("vertical_drift_pct", "vertical drift %", ".2f"), ("weak_dir_err_pct", "weak-direction err %", ".2f"))
 
 
 def _mean(values) -> float:
@@ -49,7 +53,7 @@ def _cell(value: float, spec: str, best: bool) -> str:
 
 
 def table_markdown(rows: list[dict]) -> str:
-    header = ["rank", "method", *(title for _, title, _ in COLUMNS), "failures", "frames/s"]
+    header = ["rank", "method", *(title for _, title, _ in COLUMNS), "success", "frames/s"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * 2 + "---:|" * (len(header) - 2)]
     best = {}
     for key, _, _ in COLUMNS:
@@ -57,7 +61,9 @@ def table_markdown(rows: list[dict]) -> str:
         best[key] = min(finite) if finite else None
     for i, r in enumerate(rows, 1):
         cells = [_cell(r[key], spec, r[key] == best[key]) for key, _, spec in COLUMNS]
-        lines.append("| " + " | ".join([str(i), r["label"], *cells, f"{r['failures']}/{r['runs']}",
+        ok = r["runs"] - r["failures"]
+        success = f"{100.0 * ok / r['runs']:.0f} % ({ok}/{r['runs']})" if r["runs"] else "n/a"
+        lines.append("| " + " | ".join([str(i), r["label"], *cells, success,
                                          _cell(r["frames_per_second"], ".1f", False)]) + " |")
     return "\n".join(lines)
 

@@ -6,6 +6,7 @@ re-running the others::
     OUT/results/<method>/<sequence>/
       poses.txt          the method's KITTI poses (NaN after a divergence)
       diagnostics.csv    our odometry's per-frame diagnostics (its own degenerate flags)
+      config.yaml        our odometry's configuration of the run
       command.log        an external command's output
       result.json        written last (atomically): the method's key, the sequence's key, status,
                          figures, frames/s, the frames the method flagged, the error of a failed run
@@ -98,6 +99,10 @@ def run_one(method, sequence, out: str | Path, fields, *, timeout_s: float, work
             from odometry.diagnostics import write_diagnostics_csv
 
             write_diagnostics_csv(folder / "diagnostics.csv", output.diagnostics)
+        if isinstance(output.settings.get("config"), dict):  # ours: what its page recomputes the kept points by
+            import yaml
+
+            atomic_write_text(folder / "config.yaml", yaml.safe_dump(output.settings["config"], sort_keys=False))
         flagged = [] if output.degenerate is None else [int(k) for k in np.flatnonzero(output.degenerate)]
         result.update(status="ok", error=None, note=output.note, seconds=output.seconds,
                       frames_per_second=_finite(output.frames_per_second), flagged_frames=flagged,

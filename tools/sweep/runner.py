@@ -10,7 +10,6 @@ parameters and the simulator).
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -147,21 +146,21 @@ def run_sweep(
 
 
 def _sim_jobs(plan: SweepPlan, store: Store, in_memory: bool = False) -> list[SimJob]:
-    """The sequences to make; in memory unless asked for disk or one of their runs is an external command."""
-    first, needs_disk = {}, set()
+    """The sequences to make; in memory unless asked for disk (an external command gets its own staged copy
+    of a sequence in memory, ``tools.staging``: nothing of the truth is written for it)."""
+    first = {}
     for run in plan.todo:
         first.setdefault(run.sim_key, run.sim)
-        if run.command is not None:
-            needs_disk.add(run.sim_key)
     return [SimJob(str(store.root), k, first[k].scene, first[k].seed, first[k].scene_overrides, first[k].sensor_model,
-                   first[k].frames, first[k].start_s, first[k].motion_distortion,
-                   in_memory=in_memory and k not in needs_disk) for k in plan.sims]
+                   first[k].frames, first[k].start_s, first[k].motion_distortion, in_memory=in_memory)
+            for k in plan.sims]
 
 
 def _run_job(run: RunParams, store: Store, command_timeout_s: float | None) -> RunJob:
     extra = {"command_timeout_s": command_timeout_s} if command_timeout_s is not None else {}
+    # workdir None: a command runs in its stage's own folder, not in the caller's (tools.isolation)
     return RunJob(str(store.root), run.key, run.sim_key, run.describe(), run.config, run.command,
-                  workdir=os.getcwd(), method=run.method, fields=run.fields, **extra)
+                  method=run.method, fields=run.fields, **extra)
 
 
 __all__ = ["SweepPlan", "SweepResult", "plan_sweep", "run_sweep"]

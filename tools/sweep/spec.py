@@ -220,7 +220,8 @@ class SweepSpec(Params):
                                     unique=True, check=_fields_problem)
     sequences: str = param("memory", "where a sequence lives while its runs use it: memory (each worker "
                            "simulates it, nothing is written but the runs' poses and metrics) or disk (the store's "
-                           "sequences/ folder; a variant that is an external command always gets one)",
+                           "sequences/ folder); every method, an external command too, gets a staged copy of the "
+                           "sensor's data either way (tools.staging)",
                            choices=("memory", "disk"))
     keep_sequences: bool = param(True, "with sequences: disk, keep the simulated sequences for reuse (false: "
                                  "delete each once its runs are done)")
