@@ -369,20 +369,21 @@ class SweepActors:
     # ------------------------------------------------------------ per frame truth
     def tracks(self, scan_object_id: np.ndarray) -> np.ndarray:
         """(n,) ``TRACK_DTYPE`` rows: the actors alive at the sweep's start whose box comes within the sensor's
-        maximum range, in the scan frame at the sweep's start; returns counted in ``scan_object_id``."""
+        maximum range, and any other the sweep's returns hit (one that came into the world during the sweep),
+        in the scan frame at the sweep's start; returns counted in ``scan_object_id``."""
         aset, s = self.aset, self.sim.sensor
         T0 = self.T[:, 0]
         centre = T0[:, :3, :3] @ aset.box_centre[self.idx][..., None]
         centre = centre[..., 0] + T0[:, :3, 3]
         R_ref, p_ref = self.T_ref[:3, :3], self.T_ref[:3, 3]
         reach = np.linalg.norm(centre - p_ref, axis=1) - 0.5 * np.linalg.norm(aset.box_size[self.idx], axis=1)
-        keep = np.flatnonzero(self.alive[:, 0] & (reach <= s.max_range_m))
+        mine = scan_object_id[scan_object_id >= aset.first_object_id] - aset.first_object_id
+        counts = np.bincount(mine, minlength=len(aset))
+        keep = np.flatnonzero((self.alive[:, 0] & (reach <= s.max_range_m)) | (counts[self.idx] > 0))
         rows = np.zeros(len(keep), TRACK_DTYPE)
         if len(keep) == 0:
             return rows
         i = self.idx[keep]
-        mine = scan_object_id[scan_object_id >= aset.first_object_id] - aset.first_object_id
-        counts = np.bincount(mine, minlength=len(aset))
         v = self.v[keep, 0] + np.cross(self.w[keep, 0], centre[keep] - T0[keep, :3, 3])
         rows["object_id"] = aset.first_object_id + i
         rows["object_class"] = aset.class_code[i]

@@ -225,6 +225,34 @@ def test_a_sequence_with_actors_writes_their_truth_and_tracks_and_reads_them_bac
         assert np.allclose(row["velocity"][0], [v, 0, 0], atol=1e-4) and np.allclose(row["size"][0], [4, 2, 2])
 
 
+def test_an_actor_that_comes_into_the_world_during_a_sweep_has_a_track_in_that_frame(tmp_path):
+    """Two still boxes appear half-way through the first sweep, one left of the sensor and one right: the
+    head turns clockwise from behind, so only the rays to the right fire after that and meet their box; the
+    frame's tracks hold exactly the box hit, with its returns (every return's object has its track); from the
+    next frame on both are in the world and both have one."""
+    sensor = flat_sensor(rings=2, step_deg=0.5)
+    half = 0.5 * sensor.sweep_period_s
+    boxes = [Mover(box_model("box"), _at(0.0, y), np.zeros(6), span=(half, 100.0)) for y in (12.0, -12.0)]
+    world = ground_world(boxes)
+    out = simulate_sequence(world, STILL, sensor, tmp_path / "seq", frames=2, seed=1)
+    from simlidar.dataset import open_sequence
+
+    seq = open_sequence(out)
+    frames, rows = read_tracks(out / "tracks.csv")
+    ids = seq[0].fields["object_id"]
+    hit = sorted(set(ids[ids >= 1].tolist()))
+    assert hit == [2]  # the box on the right
+    assert rows[frames == 0]["object_id"].tolist() == hit
+    assert rows[frames == 0]["returns"][0] == np.sum(ids == hit[0]) > 0
+    assert sorted(rows[frames == 1]["object_id"].tolist()) == [1, 2]
+
+
+def _at(x: float, y: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = (x, y, -1.0)
+    return T
+
+
 def test_a_world_without_actors_is_written_as_before(tmp_path):
     sensor = flat_sensor(rings=4, step_deg=1.0).with_overrides(vertical_angles_deg=(-30.0, -20.0, -10.0, -5.0))
     g = trimesh.creation.box((50.0, 50.0, 1.0))

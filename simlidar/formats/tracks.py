@@ -1,7 +1,8 @@
 """``tracks.csv``: every moving object's box near the sensor, per frame (a sequence folder's, beside ``poses.txt``).
 
 Written when the world has moving objects (``simlidar.actors``); one row per frame and
-object whose box comes within the sensor's maximum range at the sweep's start::
+object whose box comes within the sensor's maximum range at the sweep's start, or that the
+frame's returns hit (one that came into the world during the sweep)::
 
     frame,object_id,class,moving,returns,x,y,z,qw,qx,qy,qz,length,width,height,vx,vy,vz
 
