@@ -160,8 +160,8 @@ def test_a_damaged_or_unknown_truth_file_is_a_one_line_error(tmp_path):
     car.write_bytes(b"NOTTRUTH" + data[8:])
     with pytest.raises(DatasetError, match=r"000000\.truth: not a truth file"):
         open_sequence(seq.path)[0]
-    car.write_bytes(data[:18] + bytes([0x02]) + data[19:])  # an optional block this version does not know
-    with pytest.raises(DatasetError, match=r"000000\.truth: optional truth blocks 0x02 this version does not read"):
+    car.write_bytes(data[:18] + bytes([0x04]) + data[19:])  # an optional block this version does not know
+    with pytest.raises(DatasetError, match=r"000000\.truth: optional truth blocks 0x04 this version does not read"):
         open_sequence(seq.path)[0]
     manifest = json.loads((seq.path / "manifest.json").read_text())
     manifest["format_version"] = 4

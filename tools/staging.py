@@ -51,7 +51,7 @@ SENSOR_FIELDS = ("ring", "time_s", "azimuth_index", "range_m")
 # The default: what the Velodyne driver's XYZIRT cloud carries besides x y z intensity.
 DEFAULT_FIELDS = ("ring", "time_s")
 # The simulator's truth: never handed to a method.
-TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather")
+TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather", "object_class", "moving", "velocity")
 
 
 class StagingError(DatasetError):
