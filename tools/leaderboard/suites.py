@@ -119,14 +119,7 @@ def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_seq
         raise SuiteError(str(exc)) from None
     sequences = []
     for seq in seqs:
-        path = out / "sequences" / seq.name
-        if not (path / "manifest.json").is_file():
-            if on_sequence is not None:
-                on_sequence(seq.name)
-            try:
-                simulate_to_folder(seq, path, force=True)
-            except ValueError as exc:
-                raise SuiteError(f"{seq.name}: {exc}") from None
+        path = _simulated_once(seq, out, simulate_to_folder, on_sequence)
         fields = None if seq.kind == "simulated" else ()
         group = seq.weather if seq.weather is not None else f"{seq.family} ({'traffic' if seq.traffic else 'static'})" \
             if traffic else f"{seq.family} ({seq.kind})"
@@ -144,17 +137,24 @@ def _stress(out: Path, frames: int | None, scenes: tuple[str, ...], on_sequence)
         raise SuiteError(str(exc)) from None
     sequences = []
     for seq in seqs:
-        path = out / "sequences" / seq.name
-        if not (path / "manifest.json").is_file():
-            if on_sequence is not None:
-                on_sequence(seq.name)
-            try:
-                simulate_to_folder(seq, path, force=True)
-            except ValueError as exc:
-                raise SuiteError(f"{seq.name}: {exc}") from None
+        path = _simulated_once(seq, out, simulate_to_folder, on_sequence)
         sequences.append(BenchSequence(seq.name, f"{seq.scene} ({'moving' if seq.moving else 'static twin'})",
                                        path, None))
     return sequences
+
+
+def _simulated_once(seq, out: Path, simulate_to_folder, on_sequence) -> Path:
+    """``OUT/sequences/<name>`` of a suite's sequence, simulated by ``simulate_to_folder(seq, path, force=True)``
+    unless a complete one is there (its manifest is written last); SuiteError naming it when it fails."""
+    path = out / "sequences" / seq.name
+    if not (path / "manifest.json").is_file():
+        if on_sequence is not None:
+            on_sequence(seq.name)
+        try:
+            simulate_to_folder(seq, path, force=True)
+        except ValueError as exc:
+            raise SuiteError(f"{seq.name}: {exc}") from None
+    return path
 
 
 __all__ = ["SUITES", "BenchSequence", "SuiteError", "bench_sequences"]
