@@ -199,7 +199,8 @@ def test_a_method_reads_the_firing_fields_without_decoding_the_truth(tmp_path):
         for name in firing.fields.dtype.names:
             assert np.array_equal(firing.fields[name], whole.fields[name]), name
         assert np.array_equal(firing.points, whole.points) and np.array_equal(firing.intensity, whole.intensity)
-    assert method_frame([seq[0]], 0) is not None  # a plain list of frames: indexed as it is
+    frames = [seq[0]]
+    assert method_frame(frames, 0) is frames[0]  # a plain list of frames: indexed as it is
     # the odometry's poses are those it gives when it reads the whole record (the same inputs)
     firing_run = run_sequence(seq, variant("salo"), seq.sensor)
     seq.frame = lambda k, truth=True: type(seq).frame(seq, k)  # (every read decodes the truth)
