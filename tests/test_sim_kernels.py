@@ -12,6 +12,7 @@ import pytest
 
 from simlidar.degeneracy import information_matrix
 from simlidar.formats.truth import octahedral_encode
+from simlidar.kernels.actors import rays_by_block
 from simlidar.kernels.files import fill_body, octahedral_codes, pack_points
 from simlidar.kernels.information import information_sums
 from simlidar.kernels.sweep import block_rays, fill_rows, measure_block, solve_hits
@@ -149,3 +150,15 @@ def test_information_sums_are_the_information_matrix():
     p, n = RNG.normal(size=(50000, 3)) * 30, unit(50000)
     H = information_sums(p, n)
     assert np.allclose(H, information_matrix(p, n), rtol=1e-12, atol=1e-9) and np.array_equal(H, H.T)
+
+
+def test_rays_by_block_is_a_stable_sort_by_block():
+    counts = np.array([0, 40, 7, 300, 1])
+    rays = np.concatenate([np.sort(RNG.choice(1000, c, replace=False)) for c in counts])
+    actor = np.repeat(np.arange(len(counts)), counts)
+    bounds = np.array([0, 96, 250, 251, 600, 1000])
+    block = np.searchsorted(bounds, rays, side="right") - 1
+    order = np.argsort(block, kind="stable")
+    rows, who, starts = rays_by_block(rays, counts, bounds)
+    assert np.array_equal(rows, rays[order] - bounds[block[order]]) and np.array_equal(who, actor[order])
+    assert np.array_equal(starts, np.searchsorted(block[order], np.arange(len(bounds))))
