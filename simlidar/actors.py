@@ -281,6 +281,8 @@ class SweepActors:
         half = aset.box_size[idx] / 2 + BOX_MARGIN_M
         self.box_lo = np.ascontiguousarray(aset.box_centre[idx] - half)
         self.box_hi = np.ascontiguousarray(aset.box_centre[idx] + half)
+        # a ray in an actor's frame, shifted by this, is in the frame of the BVH of every model (``ActorSet._fleet``)
+        self.shift = aset.model_shift[aset.model_of[idx]] - aset.fleet.offset
         self.candidates = self._windows(T_cols)
 
     # ------------------------------------------------------------ which rays may meet an actor
@@ -329,19 +331,18 @@ class SweepActors:
         nearer_ray, nearer_distance = (_NO_RAYS, _NO_DISTANCES) if nearer is None else (nearer.ray, nearer.distance)
         keep, o_a, d_a, R, p = rays_in_actor_frame(rows, j, t_rows, origin, offset, direction, self.T, self.vdt,
                                                    self.turn, self.t0, 0.0 if self.frozen else self.dt, self.box_lo,
-                                                   self.box_hi, float(max_distance), nearer_ray, nearer_distance)
+                                                   self.box_hi, float(max_distance), nearer_ray, nearer_distance,
+                                                   self.shift)
         if len(keep) == 0:
             return None
-        rows, j, t_rows = rows[keep], j[keep], t_rows[keep]
         fleet = self.aset.fleet
-        o_a += self.aset.model_shift[self.aset.model_of[self.idx[j]]] - fleet.offset
         h = fleet.cast_compact(o_a, d_a, max_distance)
         if len(h.ray) == 0:
             return None
         ray, dist, cos, normal, who, velocity = nearest_actor_hits(
-            len(origin), rows, h.ray, h.distance, h.cos_incidence, np.take(fleet._face_normal, h.face, axis=0),
-            R, p, j, t_rows, origin, offset, direction, self.v, self.w, self.t0, 0.0 if self.frozen else self.dt)
-        return ActorHits(ray, dist, cos, normal, self.idx[who], velocity)
+            len(origin), rows, keep, h.ray, h.distance, h.cos_incidence, h.face, fleet._face_normal, R, p, j, t_rows,
+            self.idx, origin, offset, direction, self.v, self.w, self.t0, 0.0 if self.frozen else self.dt)
+        return ActorHits(ray, dist, cos, normal, who, velocity)
 
     def split(self, bounds: np.ndarray) -> None:
         """Cut the candidate rays at the sweep's block bounds (global firing indices, ascending): per block, its

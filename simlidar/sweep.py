@@ -60,7 +60,7 @@ from .actors import ActorSet, merge_hits
 from .formats.tracks import TRACK_DTYPE
 from .formats.truth import MOVING_SPEED_M_S, SIDECAR_DTYPE, sidecar_dtype
 from .inside import InsideProbe, SensorInsideGeometry, probe
-from .kernels.sweep import block_rays, fill_rows, measure_block
+from .kernels.sweep import block_rays, fill_actor_rows, fill_rows, measure_block
 from .raycast import CompactHits, Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
@@ -525,14 +525,10 @@ class SweepSimulator:
                   out.xyz, out.intensity, out.ring, out.azimuth_index, out.time_s, out.range_m, out.true_range_m,
                   out.true_xyz, out.normal, out.object_id)
         if self.actors is not None:  # the moving objects' truth: class, motion, velocity in the reference frame
-            out.object_class[sl], out.moving[sl], out.velocity[sl] = 0, False, 0.0
-        if moving:
-            on = np.flatnonzero(hits.actor >= 0)
-            rows = off + on
-            out.object_class[rows] = self.actors.class_code[hits.actor[on]]
-            velocity = hits.actor_velocity @ R_ref
-            out.velocity[rows] = velocity
-            out.moving[rows] = np.linalg.norm(velocity, axis=1) > MOVING_SPEED_M_S
+            velocity = hits.actor_velocity @ R_ref if moving else _NO_ROWS
+            fill_actor_rows(off, len(hits.ray), hits.actor if moving else _NO_INDEX, self.actors.class_code, velocity,
+                            np.linalg.norm(velocity, axis=1) > MOVING_SPEED_M_S, out.object_class, out.moving,
+                            out.velocity)
         if c.kind is not None:
             self._fill_weather(c, out, sl)
             out.object_id[sl][_bare(hits)] = -1

@@ -124,7 +124,7 @@ def ray_windows(centre: np.ndarray, alive: np.ndarray, knot_t: np.ndarray, col_t
 def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, origin: np.ndarray, offset: np.ndarray,
                         direction: np.ndarray, T: np.ndarray, vdt: np.ndarray, turn: np.ndarray, t0: float,
                         dt: float, box_lo: np.ndarray, box_hi: np.ndarray, max_distance: float,
-                        nearer_ray: np.ndarray, nearer_distance: np.ndarray):
+                        nearer_ray: np.ndarray, nearer_distance: np.ndarray, shift: np.ndarray):
     """The candidate rays that cross their actor's box, in the actor's frame at each ray's time.
 
     rows (n,): the call's rays, actor (n,): the actor (of this sweep's) each may meet, t (n,): its time;
@@ -134,9 +134,10 @@ def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, orig
     (A, K - 1, 3) the rotation vector from knot k to k + 1 in knot k's frame; box_lo, box_hi (A, 3) the box
     (with a margin) in the actor's frame. nearer_ray (h,), nearer_distance (h,): a hit each of these
     rays already has (the static world's); a ray whose hit lies before it enters the box is not kept, as no
-    hit of the actor, at least the margin farther, could be the nearer (both may be empty). Returns keep (m,)
-    indices into rows, o (m, 3), d (m, 3) in the actor's frame, R (m, 3, 3) and p (m, 3) the actor's pose at
-    the ray's time.
+    hit of the actor, at least the margin farther, could be the nearer (both may be empty). shift (A, 3): added to
+    the kept rays' origins (where each actor's model lies in the BVH they are cast against). Returns keep (m,)
+    indices into rows, o (m, 3) (shifted), d (m, 3) in the actor's frame, R (m, 3, 3) and p (m, 3) the actor's
+    pose at the ray's time.
     """
     n = rows.shape[0]
     keep = np.empty(n, np.int64)
@@ -182,6 +183,8 @@ def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, orig
                     s0, s1 = s1, s0
                 t_in, t_out = max(t_in, s0), min(t_out, s1)
         if ok and t_in <= t_out:
+            for c in range(3):
+                o_out[m, c] += shift[a, c]
             p_out[m, 0], p_out[m, 1], p_out[m, 2] = px, py, pz
             keep[m] = i
             m += 1
@@ -262,23 +265,24 @@ def merge_nearest(static_ray: np.ndarray, static_distance: np.ndarray, actor_ray
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def nearest_actor_hits(n_rays: int, rows: np.ndarray, hit: np.ndarray, distance: np.ndarray, cos: np.ndarray,
-                       n_model: np.ndarray, R: np.ndarray, p: np.ndarray, actor: np.ndarray, t: np.ndarray,
-                       origin: np.ndarray, offset: np.ndarray, direction: np.ndarray, v: np.ndarray, w: np.ndarray,
-                       t0: float, dt: float):
+def nearest_actor_hits(n_rays: int, rows: np.ndarray, keep: np.ndarray, hit: np.ndarray, distance: np.ndarray,
+                       cos: np.ndarray, face: np.ndarray, face_normals: np.ndarray, R: np.ndarray, p: np.ndarray,
+                       actor: np.ndarray, t: np.ndarray, actor_index: np.ndarray, origin: np.ndarray,
+                       offset: np.ndarray, direction: np.ndarray, v: np.ndarray, w: np.ndarray, t0: float, dt: float):
     """Per ray of a call (``n_rays``), the nearest of the actors' hits, in ray order.
 
-    rows (m,), actor (m,), t (m,), R (m, 3, 3), p (m, 3): the rays cast in the actors' frames, their actor,
-    time and the actor's pose then; hit (h,) the rows that hit, at distance (h,), cos (h,), model normal
-    (h, 3); origin + offset (3,), direction (n_rays, 3) in the world; v, w (A, K, 3) the actors' velocities at
-    the knots
-    t0 + k dt. Returns ray (q,), distance (q,), cos (q,), normal (q, 3) outward in the world, actor (q,),
-    velocity (q, 3) of the point hit (v + w x (hit - p), linear between knots). numpy: the lexsort by ray
-    then distance, its first per ray, ``R @ n``.
+    rows (n,), actor (n,), t (n,): the call's candidate rays, their actor and time; keep (m,): those cast in the
+    actors' frames (``rays_in_actor_frame``), R (m, 3, 3), p (m, 3) the actor's pose then; hit (h,) the cast
+    rays that hit (indices into keep), at distance (h,), cos (h,), on triangle face (h,) of the models' BVH
+    (face_normals (F, 3)); actor_index (A,) an actor's index in its set; origin + offset (3,), direction
+    (n_rays, 3) in the world; v, w (A, K, 3) the actors' velocities at the knots t0 + k dt. Returns ray (q,),
+    distance (q,), cos (q,), normal (q, 3) outward in the world, actor (q,) in its set, velocity (q, 3) of the
+    point hit (v + w x (hit - p), linear between knots). numpy: the lexsort by ray then distance, its first per
+    ray, ``R @ n``.
     """
     best = np.full(n_rays, -1, np.int64)
     for i in range(hit.shape[0]):
-        r = rows[hit[i]]
+        r = rows[keep[hit[i]]]
         if best[r] < 0 or distance[i] < distance[best[r]]:
             best[r] = i
     q = 0
@@ -298,13 +302,14 @@ def nearest_actor_hits(n_rays: int, rows: np.ndarray, hit: np.ndarray, distance:
         if i < 0:
             continue
         k_row = hit[i]
-        a = actor[k_row]
-        ray[o], dist[o], cs[o], who[o] = r, distance[i], cos[i], a
+        a = actor[keep[k_row]]
+        ray[o], dist[o], cs[o], who[o] = r, distance[i], cos[i], actor_index[a]
+        f = face[i]
         for c in range(3):
-            normal[o, c] = (R[k_row, c, 0] * n_model[i, 0] + R[k_row, c, 1] * n_model[i, 1]
-                            + R[k_row, c, 2] * n_model[i, 2])
+            normal[o, c] = (R[k_row, c, 0] * face_normals[f, 0] + R[k_row, c, 1] * face_normals[f, 1]
+                            + R[k_row, c, 2] * face_normals[f, 2])
         if dt > 0:
-            x = min(max((t[k_row] - t0) / dt, 0.0), K - 1 - 1e-12)
+            x = min(max((t[keep[k_row]] - t0) / dt, 0.0), K - 1 - 1e-12)
             k = int(x)
             u = x - k
         else:
