@@ -148,8 +148,9 @@ def test_on_the_bare_tunnel_the_imu_holds_where_lidar_alone_drifts(tmp_path):
     from simlidar.sensor import load_preset
     from tools.imu_odometry import measure
     from tools.runners import simulate_scene
+    from tools.worlds import build_scene_world
 
-    built = scenes.build_scene("bare-tunnel", 0)
+    built = build_scene_world("bare-tunnel", 0, {})
     s = load_preset("salo32").with_overrides(imu={**NOISE_FREE, "enabled": True})
     path = simulate_scene(built, s, tmp_path / "bare", 300, seed=0, start_s=2.0).path
     (_, lidar), (_, imu) = measure(path, "salo-map", None)
