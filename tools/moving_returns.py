@@ -10,8 +10,9 @@ return counts as dropped when the centroid of its voxel was (the registration an
 returns only through their centroids). Counted are the returns the odometry keeps in range
 (``clean``), over every frame, the first two included (no earlier scan to compare with: nothing is
 dropped there). Per sequence: the fraction of moving returns kept, and of static returns dropped,
-each per object class of the moving ones; with the sequence's poses, the run's end error and the
-motion it invented while the sensor truly stood still (``tools.family_suite.standstill_motion_m``).
+each per object class and per band of speed of the moving ones; with the sequence's poses, the run's
+KITTI t_err, end error and the motion it invented while the sensor truly stood still
+(``tools.family_suite.trajectory_figures``).
 """
 
 from __future__ import annotations
@@ -107,8 +108,8 @@ def returns_dropped(clean_points: np.ndarray, moving_centroids: np.ndarray | Non
 
 def rejection_figures(sequence, config: OdometryConfig, frames: int | None = None) -> dict:
     """Run ``config`` (its moving-object stage on) over a simulated sequence; the stage's verdicts against the
-    truth (``RejectionCounts``) and, where the sequence has poses, the run's end error and standstill motion."""
-    from tools.family_suite import standstill_motion_m
+    truth (``RejectionCounts``) and, where the sequence has poses, the run's t_err, end error and standstill motion."""
+    from tools.family_suite import trajectory_figures
 
     if sequence.sensor is None:
         raise MovingTruthMissing(f"{sequence.path}: no sensor model (sensor.yaml): the stage needs one")
@@ -138,9 +139,8 @@ def rejection_figures(sequence, config: OdometryConfig, frames: int | None = Non
            "moving_by_speed": [{"speed": band_name(b), "returns": r, "kept_fraction": (r - d) / r}
                                for b, (r, d) in sorted(counts.by_speed.items()) if r]}
     if sequence.poses is not None:
-        gt, est = np.asarray(sequence.poses)[:n], np.stack(odo.poses)
-        out["end_error_m"] = float(np.linalg.norm(est[-1, :3, 3] - gt[-1, :3, 3]))
-        out["standstill_motion_m"] = standstill_motion_m(gt, est)
+        figures = trajectory_figures(np.asarray(sequence.poses)[:n], np.stack(odo.poses))
+        out.update({k: figures.get(k) for k in ("t_err_pct", "end_error_m", "standstill_motion_m")})
     return out
 
 
@@ -166,9 +166,10 @@ def main(argv: list[str] | None = None) -> int:
         line = (f"{r['sequence']}: {r['frames']} frames; moving returns kept {100 * r['moving_kept_fraction']:.1f} % "
                 f"of {r['moving_returns']}, static returns dropped {100 * r['static_dropped_fraction']:.2f} % "
                 f"of {r['static_returns']}")
-        if "end_error_m" in r:
+        if r.get("end_error_m") is not None:
             still = r["standstill_motion_m"]
-            line += f"; end error {r['end_error_m']:.3f} m" + ("" if still is None else f", standstill {still:.4f} m")
+            line += (f"; t_err {r['t_err_pct']:.3f} %, end error {r['end_error_m']:.3f} m"
+                     + ("" if still is None else f", standstill {still:.4f} m"))
         print(line)
         if r["moving_kept_fraction_by_class"]:
             print("  moving kept by class: " + ", ".join(f"{c} {100 * f:.1f} %"
