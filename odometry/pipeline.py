@@ -441,9 +441,10 @@ class Odometry:
         """The moving-object stage (``odometry.dynamic``, ``dynamic.enabled``): the scan's points (as measured)
         at places a recent scan saw through, placed with the predicted pose, leave its ICP points and centroids;
         ``prepared.moving`` keeps the verdict on each centroid. Nothing is dropped where too few points would
-        stay (the frame is then flagged as it would be)."""
+        stay (the frame is then flagged as it would be), nor at the cold start: its guess is no motion at all, and
+        a scan placed a metre off would stand in the free space its own surfaces left."""
         st = self.state
-        if st.free_space is None or not st.poses:
+        if st.free_space is None or len(st.poses) < 2:
             return
         t = time.perf_counter()
         scan = prepared.scan

@@ -2,6 +2,7 @@
 
     python -m tools.moving_returns out/seqs/red_light-moving
     python -m tools.moving_returns SEQ1 SEQ2 --set dynamic.free_margin_m=0.3 --frames 200 --out rejection.json
+    python -m tools.moving_returns out/seqs/red_light-moving --oracle     # the truth's static returns only
 
 The odometry (the default variant, with ``dynamic.enabled`` and any ``--set``) runs over each
 simulated sequence as always (its scans, times and rings only); the truth's per-return ``moving``
@@ -106,14 +107,17 @@ def returns_dropped(clean_points: np.ndarray, moving_centroids: np.ndarray | Non
     return moving_centroids[slot]
 
 
-def rejection_figures(sequence, config: OdometryConfig, frames: int | None = None) -> dict:
+def rejection_figures(sequence, config: OdometryConfig, frames: int | None = None, oracle: bool = False) -> dict:
     """Run ``config`` (its moving-object stage on) over a simulated sequence; the stage's verdicts against the
-    truth (``RejectionCounts``) and, where the sequence has poses, the run's t_err, end error and standstill motion."""
+    truth (``RejectionCounts``) and, where the sequence has poses, the run's t_err, end error and standstill motion.
+
+    oracle: instead, the stage off and the odometry given only the returns the truth says are static: what a
+    perfect moving-object stage would leave (its verdicts are the truth's: every moving return dropped)."""
     from tools.family_suite import trajectory_figures
 
     if sequence.sensor is None:
         raise MovingTruthMissing(f"{sequence.path}: no sensor model (sensor.yaml): the stage needs one")
-    config = config.replace(dynamic={"enabled": True})
+    config = config.replace(dynamic={"enabled": not oracle})
     odo = Odometry(config, sequence.sensor)
     counts = RejectionCounts()
     n = len(sequence) if frames is None else min(frames, len(sequence))
@@ -123,14 +127,21 @@ def rejection_figures(sequence, config: OdometryConfig, frames: int | None = Non
         if moving is None:
             raise MovingTruthMissing(f"{sequence.path}: frame {k} has no per-return 'moving' truth "
                                      "(simulate a world with traffic: --set traffic.enabled=true, or a stress scene)")
-        prepared = odo.prepare(frame.points, frame.time_s, frame.ring, first=not odo.poses)
+        moving = moving.astype(bool)
+        given = np.flatnonzero(~moving) if oracle else np.arange(len(moving))
+        times, rings = frame.time_s, frame.ring
+        prepared = odo.prepare(frame.points[given], None if times is None else times[given],
+                               None if rings is None else rings[given], first=not odo.poses)
         stamp = float(sequence.times[k]) if sequence.times is not None else None
         odo.register_prepared(prepared, stamp_s=stamp)
-        rows = prepared.clean.kept_rows
         classes, velocity = frame.field("object_class"), frame.field("velocity")
-        # (the voxel grid of the clean points as measured: the one the centroids came from)
-        dropped = returns_dropped(prepared.clean.points, prepared.moving, config.filter.voxel_size_m)
-        counts.add(moving.astype(bool)[rows], dropped, None if classes is None else classes[rows],
+        if oracle:
+            rows, dropped = np.arange(len(moving)), moving
+        else:
+            rows = prepared.clean.kept_rows
+            # (the voxel grid of the clean points as measured: the one the centroids came from)
+            dropped = returns_dropped(prepared.clean.points, prepared.moving, config.filter.voxel_size_m)
+        counts.add(moving[rows], dropped, None if classes is None else classes[rows],
                    None if velocity is None else np.linalg.norm(velocity[rows], axis=1))
     out = {"sequence": str(sequence.path), "frames": n, "moving_returns": counts.moving,
            "moving_kept_fraction": counts.moving_kept_fraction, "static_returns": counts.static,
@@ -154,11 +165,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--variant", default="salo-map", help="the odometry variant (default: salo-map, the default)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="an odometry key (repeatable)")
     ap.add_argument("--frames", type=int, default=None, help="only the first N frames of each sequence")
+    ap.add_argument("--oracle", action="store_true",
+                    help="the stage off, and the odometry given only the returns the truth says are static (the "
+                         "figures a perfect moving-object stage would reach)")
     ap.add_argument("--out", type=Path, default=None, help="also write the figures as JSON here")
     args = ap.parse_args(argv)
     try:
         config = config_from_dict(changes_from_assignments(args.set), base=variant(args.variant), origin="--set")
-        results = [rejection_figures(open_sequence(path), config, args.frames) for path in args.sequences]
+        results = [rejection_figures(open_sequence(path), config, args.frames, args.oracle) for path in args.sequences]
     except ValueError as exc:  # (a sequence that cannot be read, a bad key, no truth: one line)
         print(f"error: {exc}", file=sys.stderr)
         return 2
