@@ -155,6 +155,23 @@ class PolesParams(_Stage):
 
 
 @dataclass(frozen=True)
+class DynamicParams(_Stage):
+    """The moving-object stage (odometry/dynamic.py): returns where recent scans saw through are kept out."""
+
+    section_name = "dynamic"
+    enabled: bool = param(False, "drop from the registration and the map the scan's points at places recent scans "
+                          "saw through (something moved there); needs the sensor")
+    history_frames: int = param(30, "how many frames back the oldest scan a point is checked against is; it is "
+                                "checked against the scans 1, 2, 4, 8, ... frames back and that one", min=1)
+    free_margin_m: float = param(0.5, "how far beyond a point every return around its direction must have "
+                                 "reached for its place to count as seen through", above=0.0)
+    window_rows: int = param(1, "rings either side of a direction whose returns must all have reached beyond "
+                             "the point", min=0)
+    window_columns: int = param(2, "azimuth columns either side of a direction whose returns must all have "
+                                "reached beyond the point", min=0)
+
+
+@dataclass(frozen=True)
 class GcrParams(_Stage):
     """The geometric correspondence rejector (GCR, odometry/gcr.py)."""
 
@@ -242,6 +259,7 @@ class OdometryConfig(Params):
     match: MatchParams = section(MatchParams)
     map: MapParams = section(MapParams)
     poles: PolesParams = section(PolesParams)
+    dynamic: DynamicParams = section(DynamicParams)
     gcr: GcrParams = section(GcrParams)
     icp: IcpParams = section(IcpParams)
     degeneracy: DegeneracyParams = section(DegeneracyParams)

@@ -41,12 +41,13 @@ from .cold_start import better_constrained, coarse_config, first_registration
 from .config import OdometryConfig
 from .deskew import RedeskewMemo, redeskew_scan
 from .diagnostics import FrameDiagnostics
+from .dynamic import FreeSpace, drop_rows, sensor_frame_points
 from .filters import FilteredScan, background, scan_normals_needed
 from .icp import NearestCache, RegistrationResult, Source, Target, match, register, rejectors_for
 from .inertial import InertialOdometry
 from .kdtree import KDTree
 from .local_map import LocalMap
-from .poles import PoleMap
+from .poles import PoleMap, Poles
 from .preparation import PreparedScan, prepare_scan
 from .rejectors import Rejector
 from .targets import filtered_scan_target, make_source, map_points, new_local_map
@@ -72,6 +73,7 @@ class OdometryState:
         the background thread while the next scan is prepared; None before.
     local_map: the map of recent scans (``match.target: map``), else None.
     pole_map: the poles of recent frames (``poles.enabled``, with a sensor), else None.
+    free_space: the free space of recent registered scans (``dynamic.enabled``), else None.
     """
 
     poses: list[np.ndarray] = field(default_factory=list)
@@ -84,6 +86,7 @@ class OdometryState:
     target_tree: tuple[np.ndarray, Future] | None = None
     local_map: LocalMap | None = None
     pole_map: PoleMap | None = None
+    free_space: FreeSpace | None = None
 
 
 @dataclass
@@ -215,12 +218,17 @@ class Odometry:
                 f"variant '{config.name}' uses the geometric correspondence rejector, which needs the "
                 "sensor's ring table: pass --sensor PRESET|FILE (or use a sequence folder with sensor.yaml)"
             )
+        if config.dynamic.enabled and sensor is None:
+            raise OdometryError(
+                f"variant '{config.name}' uses the moving-object stage (dynamic.enabled), which needs the sensor's "
+                "rings and azimuth step: pass --sensor PRESET|FILE (or use a sequence folder with sensor.yaml)")
         self.config = config
         self.sensor = sensor
         # (poles need the sensor's range image: its rings and azimuth columns)
         self.with_poles = config.poles.enabled and sensor is not None
         self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None,
-                                   pole_map=PoleMap(config.poles.frames_kept) if self.with_poles else None)
+                                   pole_map=PoleMap(config.poles.frames_kept) if self.with_poles else None,
+                                   free_space=FreeSpace(config.dynamic, sensor) if config.dynamic.enabled else None)
         self.diagnostics: list[FrameDiagnostics] = []
         self.inertial = None
         if config.imu.enabled and imu is not None and len(imu) >= 2:
@@ -295,6 +303,7 @@ class Odometry:
             if imu is not None:
                 T_guess, correction = imu.motion, se3.inverse(imu.motion) @ imu.sweep
         T_sweep = T_guess if correction is None else T_guess @ correction
+        self._drop_moving(prepared, T_guess, period)
         prepared.diag.deskewed = prepared.deskewing
         t = time.perf_counter()
         memo = RedeskewMemo()
@@ -436,6 +445,10 @@ class Odometry:
             st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(points_world, alignment))
         if st.pole_map is not None and scan.poles is not None:
             st.pole_map.add(se3.transform_points(pose, scan.poles.points))
+        # (the first scan's motion within its sweep is unknown when it is kept: its free space is not)
+        if st.free_space is not None and not (frame.deskewing and len(st.poses) == 1):
+            clean = frame.prepared.clean
+            st.free_space.add(clean.points, clean.times_s if frame.deskewing else None, frame.period_s, pose, T)
         stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
         frame.seconds[stage] = frame.seconds.get(stage, 0.0) + time.perf_counter() - t
 
@@ -464,6 +477,43 @@ class Odometry:
             # INFO, not WARNING: a degenerate stretch flags frame after frame, which would bury a
             # progress bar; the diagnostics carry the flags and the commands print their count.
             log.info("frame %d: %s; pose extrapolated", diag.frame, why)
+
+    def _drop_moving(self, prepared: PreparedScan, T_guess: np.ndarray, period_s: float) -> None:
+        """The moving-object stage (``odometry.dynamic``, ``dynamic.enabled``): the scan's points (as measured)
+        at places a recent scan saw through, placed with the predicted pose, leave its ICP points and centroids;
+        ``prepared.moving`` keeps the verdict on each centroid. Nothing is dropped where too few points would
+        stay (the frame is then flagged as it would be), nor at the cold start: its guess is no motion at all, and
+        a scan placed a metre off would stand in the free space its own surfaces left."""
+        st = self.state
+        if st.free_space is None or len(st.poses) < 2:
+            return
+        t = time.perf_counter()
+        scan = prepared.scan
+        T_world_start = st.poses[-1] @ T_guess
+        times = scan.centroid_times_s if prepared.deskewing else None
+        moving_c = st.free_space.moving_points(
+            sensor_frame_points(scan.centroids, times, period_s, T_world_start, T_guess, measured=True))
+        if scan.points is scan.centroids:
+            moving_p = moving_c
+        else:
+            times = scan.times_s if prepared.deskewing else None
+            moving_p = st.free_space.moving_points(
+                sensor_frame_points(scan.points, times, period_s, T_world_start, T_guess, measured=True))
+        if len(moving_p) - int(moving_p.sum()) < self.config.filter.min_points:
+            moving_p, moving_c = np.zeros(len(moving_p), dtype=bool), np.zeros(len(moving_c), dtype=bool)
+        prepared.moving = moving_c
+        if moving_p.any():
+            drop_rows(scan, ~moving_p, ~moving_c)
+        scan.counts["moving"] = int(moving_p.sum())
+        poles = scan.poles
+        if poles is not None and len(poles):  # (a narrow moving thing is no pole to hold the pose by)
+            times = poles.times_s if prepared.deskewing else None
+            still = ~st.free_space.moving_points(
+                sensor_frame_points(poles.points, times, period_s, T_world_start, T_guess, measured=True))
+            scan.poles = Poles(poles.points[still], poles.counts[still], None if poles.times_s is None
+                               else poles.times_s[still])
+            scan.counts["moving_poles"] = int((~still).sum())
+        prepared.seconds["dynamic"] = time.perf_counter() - t
 
     # ---- what the stages read of the state
     def _frame_period(self, stamp_s: float | None) -> float:

@@ -78,6 +78,8 @@ class PreparedScan:
     deskewing: per-point times are known and the de-skew is on. diag, seconds: the frame's
     diagnostics and stage times so far. seconds_spent: the time its preparation took, s (counted in
     the frame's total). registered: the odometry has taken it (a scan is registered once).
+    moving: (V,) bool per voxel centroid as prepared (``scan.centroids`` before the stage drops any): the
+    moving-object stage's verdict (``odometry.dynamic``), None when the stage did not judge it.
     """
 
     clean: CleanScan
@@ -87,6 +89,7 @@ class PreparedScan:
     seconds: dict
     seconds_spent: float
     registered: bool = False
+    moving: np.ndarray | None = None
 
 
 def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarray | None, config: OdometryConfig,

@@ -32,6 +32,7 @@ EXTRA_RUNS = {
                                        "gcr": {"formula": "paper"}}),
     "salo-map/ncf-both": ("salo-map", {"ncf": {"applies_to": "both"}}),
     "bl/plain-knn,no-deskew": ("bl", {"filter": {"adjacent_ring_reach_m": None}, "deskew": {"enabled": False}}),
+    "salo-map/dynamic": ("salo-map", {"dynamic": {"enabled": True}}),
 }
 DEFAULT_FRAMES = 40
 
