@@ -205,7 +205,7 @@ class Odometry:
         # (poles need the sensor's range image: its rings and azimuth columns)
         self.with_poles = config.poles.enabled and sensor is not None
         self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None,
-                                   pole_map=PoleMap(config.poles.frames_kept) if self.with_poles else None)
+                                   pole_map=self._new_pole_map() if self.with_poles else None)
         self.diagnostics: list[FrameDiagnostics] = []
         # The rejection chains, built once: with GCR, and without (the cold start: GCR needs a close guess)
         self._chain_with_gcr = rejectors_for(config)
@@ -424,6 +424,9 @@ class Odometry:
             log.info("frame %d: %s; pose extrapolated", diag.frame, why)
 
     # ---- what the stages read of the state
+    def _new_pole_map(self) -> PoleMap:
+        return PoleMap(self.config.poles.frames_kept, confirmed_only=self.config.poles.clutter_filter)
+
     def _frame_period(self, stamp_s: float | None) -> float:
         st = self.state
         if stamp_s is not None and st.last_stamp_s is not None and stamp_s > st.last_stamp_s:
@@ -486,7 +489,7 @@ class Odometry:
             st.local_map = new_local_map(cfg, self.sensor)
             st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
         if st.pole_map is not None and st.target_scan.poles is not None:
-            st.pole_map = PoleMap(cfg.poles.frames_kept)
+            st.pole_map = self._new_pole_map()
             st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points))
 
     def _map_nearest_m(self, points_world: np.ndarray, alignment: Alignment) -> np.ndarray | None:

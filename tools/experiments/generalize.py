@@ -37,6 +37,7 @@ from tools.family_suite import (
     simulate,
     suite,
     trajectory_figures,
+    weather_suite,
 )
 from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
 from tools.runners import MethodRun
@@ -104,8 +105,9 @@ def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: d
 @dataclass(frozen=True)
 class GeneralizeParams:
     """split: "tuning" or "evaluation" (or explicit ``seeds``). families, kinds, methods, frames:
-    what runs. config_overrides: odometry parameters changed for every one of our methods, nested by
-    stage as in YAML."""
+    what runs. weather: conditions of ``tools.weather_conditions`` (each sequence in each, "clear" its
+    twin); empty: the suite as it is, without a receiver model. config_overrides: odometry parameters
+    changed for every one of our methods, nested by stage as in YAML."""
 
     split: str = "evaluation"
     seeds: tuple[int, ...] = ()
@@ -115,6 +117,7 @@ class GeneralizeParams:
     frames: int = DEFAULT_FRAMES
     config_overrides: dict = field(default_factory=dict)
     segment_lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M
+    weather: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.split not in SPLITS and not self.seeds:
@@ -135,7 +138,10 @@ class GeneralizeParams:
         return tuple(self.seeds) or SPLITS[self.split]
 
     def sequences(self) -> list[SuiteSequence]:
-        return suite(self.seed_list, self.frames, tuple(self.families) or None, tuple(self.kinds))
+        families = tuple(self.families) or None
+        if self.weather:
+            return weather_suite(self.seed_list, self.frames, families, tuple(self.weather), tuple(self.kinds))
+        return suite(self.seed_list, self.frames, families, tuple(self.kinds))
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -200,8 +206,9 @@ def summarize(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
     groups: dict[tuple[str, str], list[dict]] = {}
     for r in results:
         s = r["sequence"]
-        groups.setdefault((s["family"], s["kind"]), []).append(r)
-        groups.setdefault(("all", s["kind"]), []).append(r)
+        kind = s["kind"] if not s.get("weather") else f"{s['kind']}, {s['weather']}"
+        groups.setdefault((s["family"], kind), []).append(r)
+        groups.setdefault(("all", kind), []).append(r)
     for (family, kind), rs in groups.items():
         for m in methods:
             runs = [r["methods"].get(m, {}) for r in rs]
@@ -267,7 +274,8 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
             per_seq.append({"sequence": r["name"], **r["sequence"], "method": m,
                             "t_eig0_median": r.get("t_eig0_median"),
                             **{k: v for k, v in x.items() if k not in ("poses", "flags")}, **x.get("flags", {})})
-    cols = ["sequence", "family", "seed", "sensor", "kind", "frames", "noise_std_m", "start_s", "t_eig0_median",
+    cols = ["sequence", "family", "seed", "sensor", "kind", "weather", "frames", "noise_std_m", "start_s",
+            "t_eig0_median",
             "method", "ok", "note", "t_err_pct", "r_err_deg_per_100m", "vertical_drift_pct", "ate_aligned_m",
             "rpe_t_cm", "rpe_r_deg", "path_length_m", "failed", "frames_per_second", "extrapolated", "degenerate",
             "remapped_frames"]
