@@ -144,6 +144,7 @@ def build(p: Params) -> Scene:
     traj = PathTrajectory(
         path, False, p.speed_m_s, p.accel_m_s2, p.lateral_accel_m_s2, p.mount_height_m,
         np.radians(p.suspension_pitch_deg), p.suspension_heave_m, p.seed,
+        accel_smoothing_s=p.accel_smoothing_s,
     )
     s_path = paths.arc_length(path[:, :2])
     i_in, i_out = int(round(s_in / STEP_M)) - i0, int(round(s_out / STEP_M)) - i0

@@ -126,6 +126,7 @@ def build(p: Params) -> Scene:
     traj = PathTrajectory(
         path, closed, p.speed_m_s, p.accel_m_s2, p.lateral_accel_m_s2, p.mount_height_m,
         np.radians(p.suspension_pitch_deg), p.suspension_heave_m, p.seed, surface_height=terrain,
+        accel_smoothing_s=p.accel_smoothing_s,
     )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()

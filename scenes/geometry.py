@@ -276,6 +276,14 @@ class SmoothField:
         arg = x[..., None] * self.k[:, 0] + y[..., None] * self.k[:, 1] + self.phase
         return np.cos(arg) @ (self.amp[:, None] * self.k)
 
+    def hessian(self, x, y) -> np.ndarray:
+        """(k,) x, (k,) y, m -> (k, 2, 2) exact second derivatives (d2/dx2, d2/dxdy; d2/dydx, d2/dy2), 1/m."""
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        arg = x[..., None] * self.k[:, 0] + y[..., None] * self.k[:, 1] + self.phase
+        kk = self.amp[:, None, None] * self.k[:, :, None] * self.k[:, None, :]  # (n, 2, 2)
+        return -np.einsum("...n,nij->...ij", np.sin(arg), kk)
+
     def scaled(self, factor: float) -> SmoothField:
         """A copy whose values and slopes are ``factor`` times this field's."""
         out = copy.copy(self)

@@ -11,8 +11,9 @@ naming the scene and the parameter. Rules between parameters live in a scene's
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from paramspec import Param, ParamError, Params, Section, build, param, schema
 
@@ -32,6 +33,10 @@ class CommonParams(Params):
     lateral_accel_m_s2: float = param(
         2.0, "lateral acceleration allowed in turns (slows the vehicle in curves)", min=0.1, max=10.0
     )
+    accel_smoothing_s: float = param(
+        0.0, "length of a triangular moving average over the speed profile, which makes the acceleration and the "
+        "jerk continuous, and the body's pitch and roll response a cubic spline (what an IMU needs; the motion "
+        "lags the raw profile by half of it) (0: off, the poses as they always were)", min=0.0, max=5.0)
     mount_height_m: float = param(1.9, "lidar height above the road (roof mount)", min=0.3, max=5.0)
     suspension_pitch_deg: float = param(
         0.3, "amplitude of the body's pitch/roll oscillation at cruise speed", min=0.0, max=5.0
@@ -39,6 +44,26 @@ class CommonParams(Params):
     suspension_heave_m: float = param(0.01, "amplitude of the body's vertical oscillation at cruise speed",
                                       min=0.0, max=0.2)
     max_triangles: int = param(1_000_000, "face budget: building a larger mesh is an error", min=1000)
+
+    # Parameters added after sequences were made and cached: ``to_dict`` (a scene's ``params``, a manifest's
+    # ``scene_params``, a sweep's cache key) writes them only when they differ from their default, so that what
+    # was made before keeps its keys (a sensor file's effects follow the same rule).
+    written_when_set: ClassVar[tuple[str, ...]] = ("accel_smoothing_s",)
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for key in self.written_when_set:
+            if out[key] == defaults[key]:
+                del out[key]
+        return out
+
+
+def default_of(cls: type[CommonParams], name: str, default: Any) -> Any:
+    """A field declaring ``cls``'s parameter ``name`` again with another default (help, bounds kept): a
+    scene that is another's with other defaults (``scenes.bare_tunnel``)."""
+    declared = {f.name: f for f in dataclasses.fields(cls)}[name]
+    return dataclasses.field(default=default, metadata=declared.metadata)
 
 
 def resolve(cls: type[CommonParams], overrides: dict[str, Any] | None = None,
@@ -67,4 +92,4 @@ def scene_section(name: str, cls: type[CommonParams], description: str = "") -> 
     return Section(name, tuple(describe(cls)), description, cls)
 
 
-__all__ = ["CommonParams", "ParamError", "ParamInfo", "describe", "param", "resolve", "scene_section"]
+__all__ = ["CommonParams", "ParamError", "ParamInfo", "default_of", "describe", "param", "resolve", "scene_section"]

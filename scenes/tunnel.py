@@ -8,9 +8,15 @@ the bore's outline, rises to a hill that covers the tunnel. Inside, every
 ``feature_spacing_m`` a pair of wall lights, on alternate sides an emergency
 cabinet with a sign, and every fourth time a pair of jet fans under the roof:
 otherwise nothing fixes the position along the axis, the degenerate case.
+``bare_length_m`` leaves a stretch in the tunnel's middle without fittings (bare
+walls); ``stop_wait_s`` has the vehicle brake to a stop at the tunnel's middle,
+wait and accelerate again: where lidar alone cannot see the motion (the
+``bare-tunnel`` scene sets both).
 
 Metadata: ``interior_s`` (path arc length from the first portal to the
-second, m), ``portal_s``, ``axis_xy`` (unit direction at the tunnel's middle).
+second, m), ``portal_s``, ``axis_xy`` (unit direction at the tunnel's middle),
+``bare_s`` (the bare stretch's ends along the path, m) and ``stop_s`` (where the
+vehicle stops, m) when there are.
 
 Other scenes with a tunnel build it with ``add_bore`` and ``add_fittings`` (a
 ``Bore`` describes it) on an alignment sampled ``STEP_M`` apart.
@@ -52,6 +58,12 @@ class Params(CommonParams):
     overburden_m: float = param(25.0, "height of the hill above the road mid-tunnel", min=2.0, max=500.0)
     lane_offset_m: float = param(1.75, "the vehicle drives this far right of the centre-line",
                                  min=0.0, max=5.0)
+    bare_length_m: float = param(0.0, "a stretch this long in the tunnel's middle has no fittings: bare walls (0: "
+                                 "none)", min=0.0, max=10000.0)
+    stop_wait_s: float = param(0.0, "the vehicle brakes to a stop at the tunnel's middle and waits this long before "
+                               "driving on (0: no stop)", min=0.0, max=600.0)
+
+    written_when_set = (*CommonParams.written_when_set, "bare_length_m", "stop_wait_s")
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -63,6 +75,9 @@ class Params(CommonParams):
                              "curve_radius_m")
         if self.lane_offset_m > self.width_m / 2 - self.walkway_width_m - 1.2:
             raise ParamError(f"is {self.lane_offset_m} m: that puts the vehicle on the walkway", "lane_offset_m")
+        if self.bare_length_m > self.length_m:
+            raise ParamError(f"is longer than the tunnel ({self.bare_length_m:g} > length_m {self.length_m:g})",
+                             "bare_length_m")
         if self.overburden_m < self.height_m + 1.0:
             raise ParamError("must exceed height_m + 1 (the hill covers the bore)", "overburden_m")
         if self.cross_section == "arch" and self.height_m < self.width_m / 2 + 1.0:
@@ -211,7 +226,7 @@ def add_bore(mb: MeshBuilder, p: Bore | Params, s: np.ndarray, centre: np.ndarra
                 mb.add(v, _orient(v, np.array([[0, 1, 2], [0, 2, 3]]), toward * fwd), walk_obj)
 
 
-def build(p: Params) -> Scene:
+def build(p: Params, name: str = "tunnel") -> Scene:
     rng = np.random.default_rng([p.seed, 0x7E1])
     total = 2 * p.approach_m + p.length_m
     s_in, s_out = p.approach_m, p.approach_m + p.length_m
@@ -236,30 +251,37 @@ def build(p: Params) -> Scene:
         add_open_road(mb, centre, left, slice_rows(a, b), lat_side, land_height, road_obj, land_obj)
     add_bore(mb, p, s, centre, left, heading, s_in, s_out, lat_side, land_height, road_obj)
 
-    n_features = add_fittings(mb, p, centre, left, heading, s_in, s_out)
+    mid = (s_in + s_out) / 2
+    bare = (mid - p.bare_length_m / 2, mid + p.bare_length_m / 2) if p.bare_length_m > 0 else None
+    n_features = add_fittings(mb, p, centre, left, heading, s_in, s_out, bare)
     _approach_furniture(mb, p, s, centre, left, heading, s_in, s_out, lat_side, land_height)
 
     # The path: the right lane, offset from the centre-line.
     lane = centre[:, :2] - p.lane_offset_m * left[:, :2]
     lane = paths.smooth(lane, 1.0, STEP_M, closed=False)
     path = np.column_stack([lane, centre[:, 2]])
-    traj = PathTrajectory(
-        path, False, p.speed_m_s, p.accel_m_s2, p.lateral_accel_m_s2, p.mount_height_m,
-        np.radians(p.suspension_pitch_deg), p.suspension_heave_m, p.seed,
-    )
     s_path = paths.arc_length(path[:, :2])
     i_in, i_out = int(round(s_in / STEP_M)), int(round(s_out / STEP_M))
     i_mid = (i_in + i_out) // 2
+    stop_s = float(s_path[i_mid]) if p.stop_wait_s > 0 else None
+    traj = PathTrajectory(
+        path, False, p.speed_m_s, p.accel_m_s2, p.lateral_accel_m_s2, p.mount_height_m,
+        np.radians(p.suspension_pitch_deg), p.suspension_heave_m, p.seed,
+        accel_smoothing_s=p.accel_smoothing_s, stops=() if stop_s is None else ((stop_s, p.stop_wait_s),),
+    )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
     return Scene(
-        "tunnel", v, f, ids, labels, path, traj, p.to_dict(),
+        name, v, f, ids, labels, path, traj, p.to_dict(),
         {
             "portal_s": [float(s_path[i_in]), float(s_path[i_out])],
             "interior_s": [float(s_path[i_in]), float(s_path[i_out])],
             "axis_xy": [float(np.cos(heading[i_mid])), float(np.sin(heading[i_mid]))],
             "path_length_m": float(s_path[-1]),
             "fittings": n_features,
+            # only when set: a tunnel's metadata stays as it was
+            **({} if bare is None else {"bare_s": [float(s_path[int(round(b / STEP_M))]) for b in bare]}),
+            **({} if stop_s is None else {"stop_s": stop_s}),
         },
     )
 
@@ -290,9 +312,10 @@ def _hill(s: np.ndarray, lv: np.ndarray, p: Bore | Params, s_in: float, s_out: f
 
 
 def add_fittings(mb: MeshBuilder, p: Bore | Params, centre: np.ndarray, left: np.ndarray, heading: np.ndarray,
-                 s_in: float, s_out: float) -> int:
+                 s_in: float, s_out: float, bare: tuple[float, float] | None = None) -> int:
     """Lights, emergency cabinets with signs, and jet fans along the bore every
-    ``feature_spacing_m``; returns how many sets (arrays as for ``add_bore``)."""
+    ``feature_spacing_m``, none between ``bare``'s ends (alignment arc length, m); returns how
+    many sets (arrays as for ``add_bore``)."""
     if p.feature_spacing_m <= 0:
         return 0
     half = p.width_m / 2
@@ -300,6 +323,8 @@ def add_fittings(mb: MeshBuilder, p: Bore | Params, centre: np.ndarray, left: np
     wall_h = p.height_m if p.cross_section == "box" else p.height_m - half
     count = 0
     for k, sf in enumerate(np.arange(s_in + p.feature_spacing_m / 2, s_out - 5.0, p.feature_spacing_m)):
+        if bare is not None and bare[0] <= sf <= bare[1]:
+            continue  # the same fittings elsewhere as without a bare stretch
         i = int(round(sf / STEP_M))
         c, lv, yaw = centre[i], left[i], heading[i]
         light_h = min(wall_h - 0.3, 4.5)

@@ -15,6 +15,10 @@ pcd        a folder (or its ``velodyne/``) of          ``simlidar.formats.scan_f
 scans      any other folder (``.bin`` / ``.ply``)      ``simlidar.formats.scan_folders.open_scan_folder``
 =========  ==========================================  =========================================
 
+A sequence's IMU, when it has one (a simulated folder's ``imu.csv``, a scan folder's, a
+bag's ``sensor_msgs/Imu`` topic), is its ``imu`` (``simlidar.imu.ImuSamples``, in the
+time base of its ``times``); a simulated one's truth is its ``imu_truth``.
+
 A new format: write its reader (``open(path, sensor, poses, topic)`` returning a
 sequence, ``simlidar.sequence``) and its ``detect(path)`` in a module of
 ``simlidar.formats``, and add a ``SequenceReader`` to ``READERS`` before the

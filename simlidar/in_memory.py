@@ -21,7 +21,9 @@ What a frame carries is chosen with ``fields``:
   come from the elevation, and there are no per-point times to de-skew with).
 
 Per-frame degeneracy figures of the true normals (``simlidar.degeneracy``) are
-kept either way: they describe the world, not what a method is shown.
+kept either way: they describe the world, not what a method is shown. With the
+sensor's IMU on, ``imu`` holds its samples and ``imu_truth`` their truth, as a
+sequence folder's ``imu.csv`` and ``imu_truth.csv`` give them.
 """
 
 from __future__ import annotations
@@ -34,10 +36,11 @@ import numpy as np
 
 from . import se3
 from .degeneracy import Degeneracy, degeneracy
+from .imu import ImuSamples, ImuTruth
 from .inside import check_poses
 from .sensor import LidarModel
 from .sequence import Frame
-from .simulate import frame_start_times
+from .simulate import frame_start_times, sequence_imu
 from .sweep import SweepSimulator
 from .trajectory import Trajectory
 from .world import World
@@ -53,6 +56,7 @@ class InMemorySequence:
     points: per frame (N_k, 3) float32 measured points, m. fields: per frame a
     structured (N_k,) array (ring, time_s) or None. poses: (F, 4, 4) ``T_first_lidar``.
     times: (F,) sweep start times, s, the first 0. degeneracy: per-frame true-normal figures.
+    imu, imu_truth: the IMU's samples and their truth, or None (no IMU).
     """
 
     path: Path
@@ -64,6 +68,8 @@ class InMemorySequence:
     degeneracy: list[Degeneracy]
     manifest: dict = field(default_factory=dict)
     kind: str = "memory"
+    imu: ImuSamples | None = None
+    imu_truth: ImuTruth | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -113,6 +119,7 @@ def simulate_in_memory(
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
     check_poses(sim.raycaster, poses, strict=world.normals_reliable, source=world.source)
+    imu = sequence_imu(trajectory, sensor, frames, int(sim.seed), float(t0[0]))
     points, extra, degen = [], [], []
     for k in range(frames):
         scan = sim.sweep(trajectory, float(t0[k]), frame_index=k)
@@ -134,4 +141,5 @@ def simulate_in_memory(
     return InMemorySequence(Path(name), sensor, points, extra, rel, t0 - t0[0], degen,
                             {"seed": int(sim.seed), "fields": fields, "frames": int(frames),
                              "t_start_s": float(t_start), "motion_distortion": bool(sim.motion_distortion),
-                             **(info or {})})
+                             **(info or {})},
+                            imu=None if imu is None else imu[0], imu_truth=None if imu is None else imu[1])

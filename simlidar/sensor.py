@@ -32,6 +32,7 @@ import yaml
 
 from paramspec import Param, ParamError, Params, Section, param, schema, section
 
+from .imu import ImuModel
 from .weather import ReceiverParams, Weather
 from .yaml_file import read_yaml
 
@@ -102,6 +103,7 @@ class LidarModel(Params):
                                                 "(1: Lambertian)", min=0.0)
     receiver: ReceiverParams = section(ReceiverParams)
     weather: Weather = section(Weather)
+    imu: ImuModel = section(ImuModel)
     description: str = param("", "free text")
     source: str = param("", "where the figures come from")
 
@@ -240,6 +242,8 @@ class LidarModel(Params):
             out["weather"] = self.weather.to_dict()
         if self.azimuth_offsets_deg is not None:
             out["azimuth_offsets_deg"] = list(self.azimuth_offsets_deg)
+        if self.imu.enabled:  # the IMU's keys, all of them, only when it is on
+            out["imu"] = self.imu.to_dict()
         if self.description:
             out["description"] = self.description
         if self.source:
@@ -284,7 +288,7 @@ def _file_keys() -> Section:
              angles, pitch, lowest, "azimuth_offsets_deg", "laser_interval_s", "start_azimuth_deg",
              "ring_bias_std_m", "angular_jitter_deg", "dropout_probability", "intensity_range_ref_m",
              "beam_divergence_deg", "beam_subrays", "return_mode", "echo_separation_m", "incidence_noise_max_factor",
-             "intensity_incidence_exponent", "receiver", "weather", "description", "source"]
+             "intensity_incidence_exponent", "receiver", "weather", "imu", "description", "source"]
     members = tuple(model[k] if isinstance(k, str) else k for k in order)
     return Section("sensor", members, "a spinning lidar's rings, timing, ranges and noise", LidarModel)
 

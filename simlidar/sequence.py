@@ -3,7 +3,10 @@
 A *sequence* is anything with ``len``, indexing and iteration giving ``Frame``
 objects, and the attributes ``path``, ``kind``, ``sensor`` (``LidarModel`` or
 None), ``poses`` ((N, 4, 4) ``T_first_lidar`` or None), ``times`` ((N,) sweep
-starts, s, or None) and ``manifest`` (dict, {} when there is none). The readers
+starts, s, or None) and ``manifest`` (dict, {} when there is none); optionally
+``imu`` (``simlidar.imu.ImuSamples`` in the same time base as ``times``, or None)
+and ``imu_truth`` (``simlidar.imu.ImuTruth``, simulated sequences; read them with
+``getattr(sequence, "imu", None)``). The readers
 of ``simlidar.formats`` (opened through ``simlidar.dataset.open_sequence``) and
 ``simlidar.in_memory`` all give one; the odometry reads nothing else.
 """

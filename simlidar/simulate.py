@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .formats.salo import SequenceWriter
+from .imu import ImuUnavailable, simulate_imu
 from .inside import check_poses
 from .sensor import LidarModel
 from .sweep import Scan, SweepSimulator
@@ -21,6 +22,17 @@ log = logging.getLogger(__name__)
 def frame_start_times(sensor: LidarModel, frames: int, t_start: float = 0.0) -> np.ndarray:
     """(frames,) start time of each sweep, s: one sweep per rotation."""
     return t_start + np.arange(frames) * sensor.sweep_period_s
+
+
+def sequence_imu(trajectory, sensor: LidarModel, frames: int, seed: int, t_start: float = 0.0):
+    """The IMU of a sequence of ``frames`` sweeps from ``t_start`` (its samples and their truth, to the last
+    sweep's end; ``simlidar.imu.simulate_imu``), or None when the sensor has no IMU on."""
+    if not sensor.imu.enabled:
+        return None
+    try:
+        return simulate_imu(trajectory, sensor.imu, t_start, frames * sensor.sweep_period_s, seed)
+    except ImuUnavailable as exc:
+        raise ImuUnavailable(f"sensor '{sensor.name}': {exc}") from None
 
 
 def simulate_sequence(
@@ -50,15 +62,17 @@ def simulate_sequence(
     parameters). ``on_frame(k, scan)`` is called after each frame is simulated
     and queued for writing (progress bars); a background thread writes it while
     the next is simulated. compress_truth: zlib the truth files (``simlidar.formats.truth``).
-    Returns the finished folder.
+    With the sensor's IMU on, its samples and truth (``sequence_imu``, from the same seed) are written
+    beside the scans. Returns the finished folder.
     """
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
     sim = simulator or SweepSimulator(world, sensor, seed=seed, motion_distortion=motion_distortion)
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
+    imu = sequence_imu(trajectory, sensor, frames, seed, float(t0[0]))  # before anything is written: may refuse
     writer = SequenceWriter(out_dir, sensor, {}, force=force, n_objects=len(world.object_labels),
-                            compress_truth=compress_truth)  # refuses an existing folder now
+                            compress_truth=compress_truth, imu=imu)  # refuses an existing folder now
     strict = world.normals_reliable if strict_inside is None else bool(strict_inside)
     inside_record = check_poses(sim.raycaster, poses, strict, source=world.source)
     manifest_info = {

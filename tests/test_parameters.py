@@ -162,6 +162,7 @@ def test_the_parameters_page_is_what_the_declarations_make():
     assert "filter.voxel_size_m" in odometry and "ncf.max_normal_std_deg" in odometry
     sensor = [name for name, m in SENSOR_FILE.walk() if not isinstance(m, Section)]
     assert "weather.fog.mor_m" in sensor and "receiver.detection_range_m" in sensor
+    assert "imu.gyroscope_noise_density" in sensor
     for key in (*sensor, *schema(SweepSpec).names, *schema(CommonParams).names, *odometry):
         assert f"| `{key}` |" in page, key
 

@@ -3,6 +3,8 @@
     python -m tools.bench_sim                 # sweep speed, salo32, >= 100k-triangle world, and
                                               # end to end: salo simulate --scene city --seed 3 --frames 100
     python -m tools.bench_sim --e2e-frames 0  # skip the end-to-end run
+    python -m tools.bench_sim --imu           # the end-to-end run again with the sensor's IMU on (200 Hz):
+                                              # its cost against the run with it off, same process
     python -m tools.bench_sim --memory 1000   # also a 1000-frame sequence: peak RSS stays flat
     python -m tools.bench_sim --big-world 2000000 --e2e-frames 0   # a tiled city of >= 2M triangles:
                                               # load time, sweeps/s, memory over a 300-frame sequence
@@ -125,8 +127,10 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
     print(f"  sweep time / bare cast (1 thread):  {t_sweep / t_bare1:.2f}x")
 
 
-def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, tmp_root: str | None) -> None:
-    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast."""
+def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, tmp_root: str | None,
+                     imu: bool = False) -> None:
+    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast;
+    ``imu``: then again with the sensor's IMU on, against the first run."""
     from tools.runners import simulate_scene
     from tools.worlds import build_scene_world
 
@@ -185,6 +189,24 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
     print(f"  floor beyond the cast, CPU per sweep: the frame's files written new with their sha256 "
           f"{1e3 * cpu_floor_write:.1f} ms, its range noise drawn {1e3 * cpu_floor_noise:.1f} ms: on 2 fully used "
           f"cores at best {floor / cpu_bare:.2f}x the bare cast's time (no truth computed, nothing encoded)")
+    if imu:
+        import dataclasses
+
+        with_imu = sensor.with_overrides(imu=dataclasses.replace(sensor.imu, enabled=True))
+        with tempfile.TemporaryDirectory(dir=tmp_root) as tmp:
+            c_on, t_on = time.process_time(), time.perf_counter()
+            simulate_scene(scene, with_imu, Path(tmp) / "seq", frames, seed=seed)
+            cpu_imu, wall_imu = time.process_time() - c_on, time.perf_counter() - t_on
+            imu_bytes = sum((Path(tmp) / "seq" / f).stat().st_size for f in ("imu.csv", "imu_truth.csv"))
+        from simlidar.imu import simulate_imu
+
+        c_on = time.process_time()
+        simulate_imu(scene.trajectory, with_imu.imu, 0.0, frames * sensor.sweep_period_s, seed)
+        cpu_model = time.process_time() - c_on
+        print(f"  with the IMU on ({with_imu.imu.update_rate:g} Hz): CPU per sweep {1e3 * cpu_imu / frames:.0f} ms, "
+              f"{cpu_imu / cpu_sim:.3f}x the run with it off (wall {wall_imu / (t_end - t0):.3f}x); the IMU's "
+              f"samples alone {1e3 * cpu_model:.0f} ms for the {frames * sensor.sweep_period_s:g} s; "
+              f"imu.csv + imu_truth.csv {imu_bytes / 1e6:.2f} MB")
 
 
 WEATHER_RUNS = {
@@ -353,6 +375,7 @@ def main() -> None:
     ap.add_argument("--big-world", type=int, default=0, help="triangles of the tiled-city world run (0: skip)")
     ap.add_argument("--big-frames", type=int, default=300, help="frames of the big-world run")
     ap.add_argument("--tmp", help="folder for the end-to-end sequence (default: the system's temporary folder)")
+    ap.add_argument("--imu", action="store_true", help="run the end-to-end simulation again with the IMU on")
     ap.add_argument("--weather-repeats", type=int, default=20,
                     help="sweeps of each weather run (0: skip the weather's cost)")
     args = ap.parse_args()
@@ -361,7 +384,7 @@ def main() -> None:
     print(f"world: {len(world.faces)} triangles, built in {time.perf_counter() - t:.2f} s")
     bench_sweep(world, args.sensor, args.repeats)
     if args.e2e_frames:
-        bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp)
+        bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp, args.imu)
     if args.weather_repeats:
         bench_weather(args.e2e_scene, args.e2e_seed, args.sensor, args.weather_repeats)
     if args.big_world:

@@ -16,8 +16,11 @@ the ground-truth fields out); ``/ground_truth/odometry`` and ``/tf``: the true
 pose at each sweep start in the world frame of the simulation
 (``manifest.json``'s ``T_world_first_lidar`` times ``poses.txt``; the first
 frame's pose for other sequences), with the twist of the motion to the next
-sweep (body frame, m/s and rad/s). Stamps (header and log time alike) are
-``epoch_s`` + the sequence's ``times.txt`` (default epoch 2020-01-01T00:00:00Z,
+sweep (body frame, m/s and rad/s); with an IMU (``seq.imu``), ``/imu``
+``sensor_msgs/Imu`` with its samples from the first exported sweep's start to the
+last one's end (``sensor.yaml``'s ``imu`` keeps its mounting and noise). Stamps
+(header and log time alike) are
+``epoch_s`` + the sequence's ``times.txt`` (and the IMU's own stamps) (default epoch 2020-01-01T00:00:00Z,
 because ROS tools read a zero stamp as "no time"); the same input gives the
 same bytes.
 
@@ -25,7 +28,9 @@ same bytes.
 index, with the same fields (PLY names the normal ``nx ny nz``, as mesh tools
 expect), plus ``sensor.yaml``, ``poses.txt`` and ``times.txt`` (both relative
 to the first exported frame), so ``open_sequence`` reads a PLY folder back.
-PCD is v0.7, binary (the little-endian record) or ASCII.
+PCD is v0.7, binary (the little-endian record) or ASCII. An IMU's samples over the
+exported sweeps go into ``imu.csv`` (``simlidar.formats.imu_csv``), stamped from the
+first exported sweep's start.
 
 **TUM** (``export_tum``): ``timestamp tx ty tz qx qy qz qw`` per frame, poses
 relative to the first exported frame, timestamps the sequence's own (as
@@ -45,12 +50,13 @@ import numpy as np
 from simlidar import se3
 from simlidar.formats import rosbag
 from simlidar.formats.atomic import StagedFolder, atomic_write_text
+from simlidar.formats.imu_csv import IMU_FILE, format_imu_csv
 from simlidar.formats.kitti import format_kitti_poses, format_times
 from simlidar.formats.pcd import write_pcd
 from simlidar.formats.ply import PLY_FIELD_NAMES, write_ply_scan
 from simlidar.formats.points import point_record
 from simlidar.formats.tum import format_tum
-from simlidar.sequence import DatasetError, sweep_start_times
+from simlidar.sequence import DatasetError, frame_period_s, sweep_start_times
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +108,16 @@ def world_poses(seq) -> np.ndarray | None:
     return first @ np.asarray(seq.poses)
 
 
+def exported_imu(seq, idx: np.ndarray):
+    """The sequence's IMU samples (``simlidar.imu.ImuSamples``) from the first selected sweep's start to the last
+    one's end, or None without an IMU."""
+    imu = getattr(seq, "imu", None)
+    if imu is None:
+        return None
+    times = sweep_start_times(seq)
+    return imu.between(float(times[idx[0]]), float(times[idx[-1]]) + frame_period_s(seq.sensor) + 1e-9)
+
+
 # ---------------------------------------------------------------- ROS 2 bag
 def export_rosbag(
     seq,
@@ -126,23 +142,44 @@ def export_rosbag(
     stage = StagedFolder(out, force, ExportError)
     idx = frame_indices(seq, frames)
     times = sweep_start_times(seq)
-    stamps_ns = [int(round((epoch_s + times[k]) * 1e9)) for k in idx]
+    epoch_ns = int(round(epoch_s * 1e9))  # apart from the times: ns since 1970 are beyond float64's ns resolution
+    stamps_ns = [epoch_ns + int(round(times[k] * 1e9)) for k in idx]
     if any(b <= a for a, b in zip(stamps_ns, stamps_ns[1:], strict=False)):
         raise ExportError(f"{seq.path}: sweep times are not increasing; a bag needs increasing stamps")
     poses = world_poses(seq)
+    imu = exported_imu(seq, idx)
+    imu_ns = np.zeros(0, dtype=np.int64) if imu is None else epoch_ns + np.round(imu.time_s * 1e9).astype(np.int64)
+    gyro_var = accel_var = 0.0
+    if imu is not None and seq.sensor is not None and seq.sensor.imu.enabled:
+        model = seq.sensor.imu  # the white noise's variance per sample
+        gyro_var = model.gyroscope_noise_density**2 * model.update_rate
+        accel_var = model.accelerometer_noise_density**2 * model.update_rate
+
+    def write_imu_until(writer, j: int, stamp: int | None) -> int:  # samples j.. stamped up to stamp (None: all)
+        end = len(imu_ns) if stamp is None else int(np.searchsorted(imu_ns, stamp, side="right"))
+        if end > j:
+            writer.write_imu(imu_ns[j:end], imu.angular_velocity[j:end], imu.specific_force[j:end], gyro_var,
+                             accel_var)
+        return max(j, end)
+
     try:
         with stage:
             bag_dir = stage.path / out.name  # the bag's storage file is named after its folder
-            writer = rosbag.BagWriter(bag_dir, storage, poses=poses is not None,
+            writer = rosbag.BagWriter(bag_dir, storage, poses=poses is not None, imu=imu is not None,
                                       custom_data={"salo.source": str(seq.path), "salo.epoch_s": repr(float(epoch_s))})
             with writer:
+                done = 0  # IMU samples written: in time order with the clouds
                 for j, k in enumerate(idx):
                     pose = twist = None
                     if poses is not None:
                         pose, twist = poses[int(k)], _body_twist(poses, times, idx, j)
+                    if imu is not None:
+                        done = write_imu_until(writer, done, stamps_ns[j])
                     writer.write_frame(stamps_ns[j], point_record(seq[int(k)], truth), pose, twist)
                     if on_frame is not None:
                         on_frame(int(k))
+                if imu is not None:
+                    write_imu_until(writer, done, None)
             if seq.sensor is not None:
                 (bag_dir / "sensor.yaml").write_text(seq.sensor.to_yaml())
             stage.commit(bag_dir)
@@ -208,6 +245,10 @@ def export_scans(
                 atomic_write_text(stage.path / "poses.txt", format_kitti_poses(se3.inverse(P[0]) @ P))
             if seq.times is not None:
                 atomic_write_text(stage.path / "times.txt", format_times(sweep_start_times(seq)[idx]))
+            imu = exported_imu(seq, idx)
+            if imu is not None:
+                imu.time_s = imu.time_s - sweep_start_times(seq)[idx[0]]
+                atomic_write_text(stage.path / IMU_FILE, format_imu_csv(imu))
             stage.commit()
     except OSError as exc:
         raise ExportError(f"{out}: cannot write the scans ({exc})") from None

@@ -10,6 +10,7 @@ of its own outside the sequence's::
       times.txt                  {times}: sweep start per frame, s
       sensor.yaml                {sensor}: the sensor model (without its weather: a real sensor does not report it)
       fields/NNNNNN.npy          per-point fields the run opts into (``SENSOR_FIELDS``), one array per scan
+      imu.csv                    the IMU's samples, when the sequence has an IMU (not their truth)
     STAGE/output/poses.txt       {out}: where the method writes its KITTI poses
     STAGE/work/                  where a method's process runs (its working folder), empty at the start
 
@@ -163,12 +164,17 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
     else:
         (root / "sensor.yaml").write_text(sequence.sensor.clear_air().to_yaml())
     (root / "times.txt").write_text(format_times(sweep_start_times(sequence)))
+    imu = getattr(sequence, "imu", None)
+    if imu is not None:
+        from simlidar.formats.imu_csv import IMU_FILE, format_imu_csv
+
+        (root / IMU_FILE).write_text(format_imu_csv(imu))
     return StagedInput(root, out_dir / "poses.txt", tuple(f for f in fields if f in staged_fields), len(sequence))
 
 
 def sensor_view(sequence, fields=DEFAULT_FIELDS):
     """What ``stage_input`` would hand over, kept in memory: an in-memory sequence
-    (``simlidar.in_memory.InMemorySequence``) without poses, truth figures or manifest,
+    (``simlidar.in_memory.InMemorySequence``) without poses, truth figures, the IMU's truth or manifest,
     its per-point fields cut to ``fields`` (less ``time_s`` without motion distortion),
     its sensor without the weather.
 
@@ -178,7 +184,7 @@ def sensor_view(sequence, fields=DEFAULT_FIELDS):
 
     fields = _fields_to_hand_over(sequence, fields)
     return replace(sequence, fields=[_sensor_record(r, fields) for r in sequence.fields], poses=None,
-                   degeneracy=[], manifest={}, sensor=sequence.sensor.clear_air())
+                   degeneracy=[], manifest={}, imu_truth=None, sensor=sequence.sensor.clear_air())
 
 
 def _fields_to_hand_over(sequence, fields) -> tuple[str, ...]:

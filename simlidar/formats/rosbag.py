@@ -63,6 +63,12 @@ interpolated on SE(3) between neighbouring messages) and made relative to the
 first frame. The sensor model comes from ``sensor.yaml`` inside a bag folder or
 beside a bag file, unless one is passed.
 
+IMU: a ``sensor_msgs/Imu`` topic (the only one, or ``/imu``) is read whole when the
+bag is opened, as ``imu`` (``simlidar.imu.ImuSamples``: header stamps relative to the
+first sweep's start, so in the time base of ``times``; angular velocity and linear
+acceleration, the message's frame; its orientation is ignored). ``BagWriter`` writes one
+(``/imu``, frame ``imu``) when asked.
+
 Reading streams: opening the bag reads the cloud topic once (only each
 message's header stamp is decoded) and the odometry topic; frames are decoded
 one at a time when asked for, consecutive frames from one open cursor.
@@ -78,6 +84,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import se3
+from ..imu import ImuSamples
 from ..sensor import LidarModel, load_sensor_file
 from ..sequence import DatasetError, Frame
 from .kitti import read_kitti_poses
@@ -88,6 +95,7 @@ log = logging.getLogger(__name__)
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TFMESSAGE = "tf2_msgs/msg/TFMessage"
+IMU = "sensor_msgs/msg/Imu"
 BAG_SUFFIXES = (".mcap", ".db3")
 STORAGES = ("mcap", "sqlite3")
 
@@ -305,6 +313,7 @@ class RosbagSequence:
         ground_truth_topic: the nav_msgs/Odometry topic (default: the only one, else one whose
             name holds ``ground_truth``); "" for none.
         poses_file: a KITTI pose file (one line per cloud) used as ground truth instead.
+        imu_topic: the sensor_msgs/Imu topic (default: the only one, else ``/imu``); "" for none.
         time_field, time_unit ("s", "ms", "us", "ns"), ring_field, ring_order (``RING_ORDERS``):
             force what is otherwise detected from the first cloud (see the module doc).
 
@@ -312,14 +321,16 @@ class RosbagSequence:
         path, kind ("rosbag2"), topic, frame_id (of the first cloud), sensor (LidarModel or None),
         times: (N,) sweep starts relative to the first, s. stamps_ns: (N,) int64 header stamps, ns.
         poses: (N, 4, 4) ``T_first_lidar`` or None. layout: ``CloudLayout``. manifest: {}.
+        imu: ``simlidar.imu.ImuSamples`` (stamps in the time base of ``times``) or None. imu_topic: its topic.
+        imu_truth: None (a bag carries none).
     """
 
     kind = "rosbag2"
 
     def __init__(self, path: str | Path, sensor: LidarModel | None = None, topic: str | None = None,
                  ground_truth_topic: str | None = None, poses_file: str | Path | None = None, *,
-                 time_field: str | None = None, time_unit: str | None = None, ring_field: str | None = None,
-                 ring_order: str = "auto"):
+                 imu_topic: str | None = None, time_field: str | None = None, time_unit: str | None = None,
+                 ring_field: str | None = None, ring_order: str = "auto"):
         self.path = Path(path)
         self.manifest: dict = {}
         if ring_order not in RING_ORDERS:
@@ -339,7 +350,9 @@ class RosbagSequence:
             self._conns = self._topic_connections(reader)
             gt_conn = self._odometry_connection(reader, ground_truth_topic)
             self.ground_truth_topic = gt_conn.topic if gt_conn is not None else None
-            log_ns, stamps, gt, first_raw = self._scan(reader, gt_conn)
+            imu_conns = self._imu_connections(reader, imu_topic)
+            self.imu_topic = imu_conns[0].topic if imu_conns else None
+            log_ns, stamps, gt, first_raw, imu = self._scan(reader, gt_conn, imu_conns)
         finally:
             self._close_reader()
         if not stamps:
@@ -360,6 +373,8 @@ class RosbagSequence:
         sweep_ns = self.stamps_ns + self.layout.sweep_offset_ns
         self.times = (sweep_ns - sweep_ns[0]) * 1e-9
         self.poses = self._ground_truth(gt, sweep_ns, poses_file)
+        self.imu_truth = None
+        self.imu = self._imu_samples(imu, int(sweep_ns[0]))
 
     # ---- sequence protocol
     def __len__(self) -> int:
@@ -479,10 +494,11 @@ class RosbagSequence:
             log.warning("%s: several odometry topics and none named ground_truth; no ground truth read", self.path)
         return None
 
-    def _scan(self, reader, gt_conn):
-        """One pass over the cloud (and ground-truth) topics: log times, header stamps, odometry poses."""
-        log_ns, stamps, gt, first_raw = [], [], [], None
-        conns = self._conns + ([gt_conn] if gt_conn is not None else [])
+    def _scan(self, reader, gt_conn, imu_conns):
+        """One pass over the cloud (and ground-truth and IMU) topics: log times, header stamps, odometry
+        poses, IMU samples (stamp ns, angular velocity, linear acceleration, frame id)."""
+        log_ns, stamps, gt, first_raw, imu = [], [], [], None, []
+        conns = self._conns + ([gt_conn] if gt_conn is not None else []) + imu_conns
         try:
             for conn, t, raw in reader.messages(connections=conns):
                 if conn.topic == self.topic and conn.msgtype == POINTCLOUD2:
@@ -492,6 +508,11 @@ class RosbagSequence:
                         first_raw = bytes(raw)
                     log_ns.append(t)
                     stamps.append(header_stamp_ns(raw))
+                elif conn.msgtype == IMU:
+                    msg = self._typestore.deserialize_cdr(raw, IMU)
+                    w, a = msg.angular_velocity, msg.linear_acceleration
+                    imu.append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                                (w.x, w.y, w.z), (a.x, a.y, a.z), msg.header.frame_id))
                 else:
                     msg = self._typestore.deserialize_cdr(raw, ODOMETRY)
                     p, q = msg.pose.pose.position, msg.pose.pose.orientation
@@ -501,7 +522,39 @@ class RosbagSequence:
             raise
         except Exception as exc:  # rosbags raises several types for a damaged file
             raise BagError(f"{self.path}: cannot read the messages ({type(exc).__name__}: {exc})") from None
-        return log_ns, stamps, gt, first_raw
+        return log_ns, stamps, gt, first_raw, imu
+
+    def _imu_connections(self, reader, topic: str | None) -> list:
+        if topic == "":
+            return []
+        imus = [c for c in reader.connections if c.msgtype == IMU]
+        names = sorted({c.topic for c in imus})
+        if topic is not None:
+            if topic not in names:
+                raise BagError(f"{self.path}: no {IMU} topic {topic} (IMU topics: {', '.join(names) or 'none'})")
+        elif len(names) == 1:
+            topic = names[0]
+        elif IMU_TOPIC in names:
+            topic = IMU_TOPIC
+        elif names:
+            log.warning("%s: several IMU topics (%s) and none named %s; no IMU read (choose one with imu_topic)",
+                        self.path, ", ".join(names), IMU_TOPIC)
+            return []
+        return [c for c in imus if c.topic == topic]
+
+    def _imu_samples(self, imu: list, origin_ns: int) -> ImuSamples | None:
+        """The IMU messages, sorted by stamp, as samples in the time base of ``times`` (s since ``origin_ns``)."""
+        if not imu:
+            return None
+        imu.sort(key=lambda m: m[0])
+        stamps = np.array([m[0] for m in imu], dtype=np.int64)
+        if np.any(np.diff(stamps) <= 0):
+            log.warning("%s: %s has repeated stamps; kept once each", self.path, self.imu_topic)
+            keep = np.concatenate([[True], np.diff(stamps) > 0])
+            imu = [m for m, k in zip(imu, keep, strict=True) if k]
+            stamps = stamps[keep]
+        return ImuSamples((stamps - origin_ns) * 1e-9, np.array([m[1] for m in imu], dtype=float),
+                          np.array([m[2] for m in imu], dtype=float), imu[0][3] or "imu")
 
     def _decode(self, raw, k: int):
         try:
@@ -689,6 +742,8 @@ def open_bag(path: str | Path, sensor: LidarModel | None = None, poses: str | Pa
 POINTS_TOPIC = "/points"
 ODOMETRY_TOPIC = "/ground_truth/odometry"
 TF_TOPIC = "/tf"
+IMU_TOPIC = "/imu"
+IMU_FRAME = "imu"
 LIDAR_FRAME = "lidar"
 MAP_FRAME = "map"
 
@@ -709,24 +764,30 @@ class BagWriter:
       ``simlidar.formats.points``);
     - with ``poses``: ``/ground_truth/odometry`` ``nav_msgs/Odometry``, frame
       ``map`` -> child ``lidar``, the pose at the sweep start, zero covariances
-      and the body-frame twist given; ``/tf`` ``tf2_msgs/TFMessage``, the same pose.
+      and the body-frame twist given; ``/tf`` ``tf2_msgs/TFMessage``, the same pose;
+    - with ``imu``: ``/imu`` ``sensor_msgs/Imu``, frame ``imu``, one message per sample
+      (``write_imu``): angular velocity and linear acceleration (specific force), the
+      orientation unknown (covariance[0] = -1, as the message's definition says), the
+      covariances diagonal, the white noise's variance per sample when known (else zero: unknown).
 
     Args:
         path: the bag folder to create (must not exist; the storage file is named after it).
         storage: "mcap" or "sqlite3". poses: write the odometry and tf topics.
         custom_data: key -> text stored in the bag's metadata.
+        imu: write the IMU topic.
     Attributes:
         counts: messages written per topic.
     """
 
     def __init__(self, path: str | Path, storage: str = "mcap", poses: bool = True,
-                 custom_data: dict[str, str] | None = None):
+                 custom_data: dict[str, str] | None = None, imu: bool = False):
         rosbag2, self._ts = require_rosbags("writing")
         plugin = rosbag2.StoragePlugin.MCAP if storage == "mcap" else rosbag2.StoragePlugin.SQLITE3
         self._writer = rosbag2.Writer(Path(path), version=8, storage_plugin=plugin)
         for key, value in (custom_data or {}).items():
             self._writer.set_custom_data(key, value)
         self._poses = poses
+        self._imu = imu
         self.counts = {POINTS_TOPIC: 0}
 
     def __enter__(self) -> BagWriter:
@@ -738,6 +799,9 @@ class BagWriter:
                 self._c_odom = writer.add_connection(ODOMETRY_TOPIC, ODOMETRY, typestore=ts)
                 self._c_tf = writer.add_connection(TF_TOPIC, TFMESSAGE, typestore=ts)
                 self.counts[ODOMETRY_TOPIC] = self.counts[TF_TOPIC] = 0
+            if self._imu:
+                self._c_imu = writer.add_connection(IMU_TOPIC, IMU, typestore=ts)
+                self.counts[IMU_TOPIC] = 0
         except BaseException:
             writer.close()
             raise
@@ -795,6 +859,29 @@ class BagWriter:
         self._writer.write(self._c_tf, stamp_ns, ts.serialize_cdr(tf, TFMESSAGE))
         self.counts[ODOMETRY_TOPIC] += 1
         self.counts[TF_TOPIC] += 1
+
+    def write_imu(self, stamps_ns: np.ndarray, angular_velocity: np.ndarray, linear_acceleration: np.ndarray,
+                  gyro_variance: float = 0.0, accel_variance: float = 0.0) -> None:
+        """IMU samples: (n,) int stamps, ns (header and log time), (n, 3) rad/s, (n, 3) m/s^2; the per-sample
+        variance of each axis' noise (0: unknown)."""
+        ts, T = self._ts, self._ts.types
+        no_orientation = np.zeros(9)
+        no_orientation[0] = -1.0
+        cov_w, cov_a = np.diag([gyro_variance] * 3).ravel(), np.diag([accel_variance] * 3).ravel()
+        for stamp, w, a in zip(stamps_ns, angular_velocity, linear_acceleration, strict=True):
+            sec, nanosec = divmod(int(stamp), 1_000_000_000)
+            msg = T[IMU](
+                header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+                                                frame_id=IMU_FRAME),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=no_orientation,
+                angular_velocity=T["geometry_msgs/msg/Vector3"](x=float(w[0]), y=float(w[1]), z=float(w[2])),
+                angular_velocity_covariance=cov_w,
+                linear_acceleration=T["geometry_msgs/msg/Vector3"](x=float(a[0]), y=float(a[1]), z=float(a[2])),
+                linear_acceleration_covariance=cov_a,
+            )
+            self._writer.write(self._c_imu, int(stamp), ts.serialize_cdr(msg, IMU))
+        self.counts[IMU_TOPIC] += len(stamps_ns)
 
 
 __all__ = [

@@ -13,6 +13,8 @@ The layout (``kind == "salo"``), format version 2 (3 when the truth carries opti
       sensor.yaml           the sensor model (simlidar.sensor keys)
       degeneracy.csv        per frame: eigenvalues of the point-to-plane information from the
                             returns' true normals (``simlidar.degeneracy``)
+      imu.csv               with an IMU (``sensor.yaml``'s ``imu``): its samples, and
+      imu_truth.csv         their truth (``simlidar.formats.imu_csv``)
       manifest.json         written last: parameters, versions, frame count, sha256 per file
 
 Format version 1 (sequences written before) had ``sidecar/000000.npy`` instead: a
@@ -34,6 +36,7 @@ memory; ``open_salo`` reads it back.
 
 from __future__ import annotations
 
+import functools
 import json
 import queue
 import threading
@@ -47,6 +50,7 @@ from ..sensor import LidarModel, load_sensor_file
 from ..sequence import DatasetError
 from . import truth
 from .atomic import StagedFolder, sha256_file, write_checksummed
+from .imu_csv import IMU_FILE, IMU_TRUTH_FILE, format_imu_csv, format_imu_truth_csv, read_imu_csv, read_imu_truth_csv
 from .kitti import format_kitti_poses, format_times, read_kitti_poses, read_times
 from .scan_folders import Sequence, check_bin_sizes
 
@@ -83,11 +87,12 @@ class SequenceWriter:
     (1, 2 or 4 bytes; None: 4). format_version: 2 (compact truth, the default) or
     1 (the old ``.npy`` sidecar, kept to test the reader of old sequences).
     compress_truth: zlib the truth files (a third of the size, 45 ms more a salo32 frame).
+    imu: the sequence's IMU samples and their truth (``simlidar.imu.simulate_imu``), written at the end.
     """
 
     def __init__(self, out_dir: str | Path, sensor: LidarModel, info: dict, force: bool = False,
                  n_objects: int | None = None, format_version: int = FORMAT_VERSION, queue_frames: int = 2,
-                 compress_truth: bool = False):
+                 compress_truth: bool = False, imu=None):
         if format_version not in FORMAT_VERSIONS:
             raise ValueError(f"format_version must be one of {FORMAT_VERSIONS}, got {format_version}")
         self.out_dir = Path(out_dir)
@@ -97,6 +102,7 @@ class SequenceWriter:
         self.info = info
         self.format_version = format_version
         self.compress_truth = bool(compress_truth)
+        self.imu = imu
         self.id_bytes = 4 if n_objects is None else truth.object_id_bytes(n_objects)
         self._poses: list[np.ndarray] = []
         self._times: list[float] = []
@@ -201,6 +207,13 @@ class SequenceWriter:
             "degeneracy.csv": CSV_HEADER + "\n" + "".join(self._degeneracy_rows[k] + "\n"
                                                           for k in sorted(self._degeneracy_rows)),
         }
+        imu_info = {}
+        if self.imu is not None:
+            samples, imu_truth = self.imu
+            texts[IMU_FILE] = format_imu_csv(samples)
+            texts[IMU_TRUTH_FILE] = format_imu_truth_csv(imu_truth)
+            imu_info = {"imu": {"samples": len(samples), "frame_id": samples.frame_id,
+                                "gravity_first_m_s2": [round(float(g), 12) for g in imu_truth.gravity]}}
         for fname, text in texts.items():
             (self.tmp / fname).write_text(text)
             self._checksums[fname] = sha256_file(self.tmp / fname)
@@ -213,6 +226,7 @@ class SequenceWriter:
             "sensor": self.sensor.name,
             "T_world_first_lidar": [round(float(v), 12) for v in poses_world[0, :3, :4].ravel()],
             **self.info,
+            **imu_info,
             "files": dict(sorted(self._checksums.items())),
         }
         (self.tmp / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
@@ -261,7 +275,17 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
             except OSError as exc:
                 raise DatasetError(f"{car}: cannot read truth ({exc.strerror})") from None
             return truth.decode(data, xyz, own, where=car)
-    return Sequence(path, "salo", scans, sensor or own, gt, times, manifest, cars, read_sidecar=reader)
+    imu = imu_truth = None
+    if "imu" in manifest:
+        for f in (IMU_FILE, IMU_TRUTH_FILE):
+            if not (path / f).is_file():
+                raise DatasetError(f"{path / f}: missing, the manifest lists an IMU")
+        frame_id = str(manifest["imu"].get("frame_id", "imu"))
+        gravity = manifest["imu"].get("gravity_first_m_s2")
+        imu = functools.partial(read_imu_csv, path / IMU_FILE, frame_id)  # read when asked for
+        imu_truth = functools.partial(read_imu_truth_csv, path / IMU_TRUTH_FILE, gravity)
+    return Sequence(path, "salo", scans, sensor or own, gt, times, manifest, cars, read_sidecar=reader, imu=imu,
+                    imu_truth=imu_truth)
 
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FORMAT_VERSIONS", "FORMAT_VERSION_BLOCKS", "SIDECAR_FIELDS",

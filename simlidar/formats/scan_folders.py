@@ -8,15 +8,16 @@ frame, with an optional ``.npy`` sidecar of per-point fields each. Its readers:
   the lidar frame with ``calib.txt``'s ``Tr``, the sensor KITTI's HDL-64E unless told otherwise;
 - ``open_pcd_folder``: a folder of ``.pcd`` scans (``salo export --format pcd``);
 - ``open_scan_folder``: a folder of ``.bin`` / ``.ply`` scans (or its
-  ``velodyne/``), with ``sensor.yaml``, ``poses.txt``, ``times.txt`` and per-point
+  ``velodyne/``), with ``sensor.yaml``, ``poses.txt``, ``times.txt``, per-point
   fields (``fields/NNNNNN.npy``, a structured array per scan: ``ring``, ``time_s``,
-  ...) when present.
+  ...) and an IMU's ``imu.csv`` (``simlidar.formats.imu_csv``) when present.
 
 The simulator's own folder layout is ``simlidar.formats.salo``.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -26,6 +27,7 @@ from .. import se3
 from ..sensor import LidarModel, load_sensor, load_sensor_file
 from ..sequence import DatasetError, Frame
 from .atomic import sha256_file
+from .imu_csv import IMU_FILE, read_imu_csv
 from .kitti import camera_poses_to_lidar, check_bin_size, read_bin, read_kitti_calib_tr, read_kitti_poses, read_times
 from .pcd import read_pcd
 from .ply import read_ply_scan
@@ -41,11 +43,14 @@ class Sequence:
             frame's (N, 3) float32 points; the simulator's compact truth).
         sensor: LidarModel or None. poses: (N, 4, 4) ``T_first_lidar`` or None.
         times: (N,) s or None. manifest: dict (simulated sequences) or {}.
+        imu: ``simlidar.imu.ImuSamples`` or None; imu_truth: ``simlidar.imu.ImuTruth`` or None (simulated
+            sequences). Either may be given as a function that reads it, called when first asked for.
     """
 
     def __init__(self, path: Path, kind: str, scan_files: list[Path], sensor, poses, times,
                  manifest: dict | None = None, sidecar_files: list[Path] | None = None,
-                 read_sidecar: Callable[[Path, np.ndarray], np.ndarray] | None = None):
+                 read_sidecar: Callable[[Path, np.ndarray], np.ndarray] | None = None,
+                 imu=None, imu_truth=None):
         self.path = path
         self.kind = kind
         self.scan_files = scan_files
@@ -55,6 +60,23 @@ class Sequence:
         self.times = times
         self.manifest = manifest or {}
         self.read_sidecar = read_sidecar
+        self._imu = {"imu": imu, "imu_truth": imu_truth}
+
+    def _loaded(self, key: str):
+        value = self._imu[key]
+        if callable(value):
+            value = self._imu[key] = value()
+        return value
+
+    @property
+    def imu(self):
+        """The IMU's samples (``simlidar.imu.ImuSamples``), or None."""
+        return self._loaded("imu")
+
+    @property
+    def imu_truth(self):
+        """The IMU samples' truth (``simlidar.imu.ImuTruth``), or None."""
+        return self._loaded("imu_truth")
 
     def __len__(self) -> int:
         return len(self.scan_files)
@@ -213,7 +235,8 @@ def _open_folder(path: Path, exts: tuple[str, ...], kind: str, sensor: LidarMode
         rel_poses = se3.inverse(rel_poses[0]) @ rel_poses[: len(scans)]
     times = read_times(path / "times.txt") if (path / "times.txt").is_file() else None
     fields = _field_files(path, scans) if kind == "scans" else None
-    return Sequence(path, kind, scans, sensor, rel_poses, times, sidecar_files=fields)
+    imu = functools.partial(read_imu_csv, path / IMU_FILE) if (path / IMU_FILE).is_file() else None
+    return Sequence(path, kind, scans, sensor, rel_poses, times, sidecar_files=fields, imu=imu)
 
 
 def _field_files(path: Path, scans: list[Path]) -> list[Path] | None:

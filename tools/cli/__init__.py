@@ -13,13 +13,14 @@ import argparse
 import logging
 import sys
 
+from simlidar.imu import ImuUnavailable
 from simlidar.sensor import SensorError
 from simlidar.sequence import DatasetError
 
 from .common import CommandError
 
 # Errors that are the user's input, reported in one line without a traceback.
-USER_ERRORS: tuple[type[BaseException], ...] = (SensorError, DatasetError, FileExistsError)
+USER_ERRORS: tuple[type[BaseException], ...] = (SensorError, DatasetError, FileExistsError, ImuUnavailable)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -70,6 +70,9 @@ def add_commands(sub) -> None:
         action="store_false",
         help="fire every ray of a sweep from the sweep's start pose",
     )
+    p.add_argument("--imu", action="store_true",
+                   help="simulate the sensor's IMU too (imu.csv, imu_truth.csv; its keys from the sensor file's imu "
+                   "section, else the defaults: docs/imu.md); along a scene's path only")
     p.add_argument("--compress-truth", action="store_true",
                    help="zlib the per-return truth files: a third of their size, slower to write")
     p.add_argument("--out", type=Path, required=True, help="output sequence folder")
@@ -84,6 +87,8 @@ def _sensor_from_args(args):
     sensor = load_sensor(args.sensor)
     if getattr(args, "noise_std", None) is not None:
         sensor = sensor.with_overrides(range_noise_std_m=args.noise_std)
+    if getattr(args, "imu", False):
+        sensor = sensor.with_overrides(imu=dataclasses.replace(sensor.imu, enabled=True))
     if getattr(args, "sensor_set", None):
         try:
             values = schema(LidarModel).read(assignments(args.sensor_set, "--sensor-set"), "--sensor-set",
