@@ -19,7 +19,7 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import bare_tunnel, canyon, city, forest, highway, open_field, suburb, tunnel
+from . import bare_tunnel, bridge, canyon, city, forest, garage, highway, open_field, suburb, tunnel
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve, scene_section
 
@@ -33,6 +33,8 @@ SCENES: dict[str, ModuleType] = {
     "forest": forest,
     "suburb": suburb,
     "canyon": canyon,
+    "garage": garage,
+    "bridge": bridge,
     "bare-tunnel": bare_tunnel,
 }
 

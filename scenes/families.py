@@ -158,6 +158,40 @@ _FAMILIES: dict[str, Family] = {
         "roughness_m": Uniform(0.5, 5.0),
         "speed_m_s": Uniform(6.0, 14.0),
     }),
+    # Worlds stacked on themselves (docs/simulation.md). Appended: a family's place sets its sensors.
+    "garage": Family("garage", {
+        "levels": Integers(2, 4),
+        "clear_height_m": Uniform(2.1, 2.6),
+        "slab_thickness_m": Uniform(0.25, 0.35),
+        "beam_depth_m": Uniform(0.0, 0.5),
+        "bays": Integers(7, 10),  # the longest ramp (3.45 m at 10 %) needs 7 bays of 7.5 m
+        "pillar_spacing_m": Uniform(7.5, 8.5),
+        "pillar_width_m": Uniform(0.4, 0.6),
+        "aisle_width_m": Uniform(6.0, 7.5),
+        "stall_depth_m": Uniform(4.9, 5.5),
+        "ramp_grade_pct": Uniform(10.0, 15.0),
+        "ramp_transition_m": Uniform(3.0, 5.0),
+        "helix_radius_m": Uniform(9.0, 13.0),
+        "route": Choice(("ramps_up", "helix_up")),
+        "closed_sides": Choice(("none", "ground", "covered")),
+        "occupancy": Uniform(0.2, 0.95),
+        "speed_m_s": Uniform(3.5, 6.0),  # garage driving
+    }),
+    "bridge": Family("bridge", {
+        "lanes": Integers(1, 2),
+        "pier": Choice((True, False)),
+        "road_b_width_m": Uniform(7.5, 11.0),
+        "clearance_m": Uniform(4.6, 5.4),
+        "deck_depth_m": Uniform(0.7, 1.4),
+        "loop_radius_m": Uniform(21.0, 26.0),  # passing under and over within 20 s
+        "b_grade_pct": Uniform(3.0, 6.0),
+        "lateral_accel_m_s2": Uniform(3.0, 4.0),
+        "approach_m": Uniform(60.0, 200.0),
+        "lamp_spacing_m": Uniform(25.0, 60.0),
+        "trees": Integers(20, 200),
+        "buildings": Integers(0, 25),
+        "speed_m_s": Uniform(9.0, 13.0),
+    }),
 }
 
 FAMILIES: tuple[str, ...] = tuple(_FAMILIES)

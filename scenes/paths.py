@@ -1,6 +1,9 @@
-"""Plane polylines for drivable paths: corners rounded by arcs, resampling, offsets."""
+"""Polylines for drivable paths: corners rounded by arcs, resampling, offsets, and ``Route``:
+a path driven as straights and arcs, each with its own height profile."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
@@ -110,3 +113,53 @@ def left_normals(points: np.ndarray, closed: bool) -> np.ndarray:
 def offset(points: np.ndarray, distance_m: float, closed: bool) -> np.ndarray:
     """Shift (m, 2) points ``distance_m`` to the left of travel (negative: right)."""
     return points + distance_m * left_normals(points, closed)
+
+
+class Route:
+    """A path built by driving it: straights and circular arcs from a start point and heading,
+    each with a height profile of its own (multi-level worlds: a ramp, a helix).
+
+    Points come every ``step_m`` (about: each piece is divided evenly); ``points`` is the (m, 3)
+    path so far, ``marks`` the index of each named place (``mark``). Headings in radians, x
+    east, y north, arcs turning left for a positive sweep.
+    """
+
+    def __init__(self, start_xy, heading: float, z: float, step_m: float = 0.5):
+        self.xy = np.asarray(start_xy, dtype=float)
+        self.heading = float(heading)
+        self.z = float(z)
+        self.step_m = step_m
+        self._pieces: list[np.ndarray] = [np.array([[*self.xy, self.z]])]
+        self.marks: dict[str, int] = {}
+
+    @property
+    def points(self) -> np.ndarray:
+        return np.vstack(self._pieces)
+
+    def mark(self, name: str) -> None:
+        """Remember the index of the current (last) point as ``name``."""
+        self.marks[name] = sum(len(p) for p in self._pieces) - 1
+
+    def _append(self, xy: np.ndarray, u: np.ndarray, height: Callable[[np.ndarray], np.ndarray] | None) -> None:
+        z = np.full(len(u), self.z) if height is None else self.z + np.asarray(height(u), dtype=float)
+        self._pieces.append(np.column_stack([xy, z]))
+        self.xy, self.z = xy[-1].copy(), float(z[-1])
+
+    def straight(self, length_m: float, height: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+        """Drive ``length_m`` straight on; ``height(u)``: (k,) distance -> (k,) rise above the start, m."""
+        n = max(1, int(np.ceil(length_m / self.step_m)))
+        u = length_m * np.arange(1, n + 1) / n
+        d = np.array([np.cos(self.heading), np.sin(self.heading)])
+        self._append(self.xy + u[:, None] * d, u, height)
+
+    def arc(self, radius_m: float, sweep_rad: float, height: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+        """Turn through ``sweep_rad`` (positive: left) on a circle of ``radius_m``; ``height`` as ``straight``'s."""
+        length = radius_m * abs(sweep_rad)
+        n = max(2, int(np.ceil(length / self.step_m)))
+        u = length * np.arange(1, n + 1) / n
+        side = np.sign(sweep_rad)
+        centre = self.xy + side * radius_m * np.array([-np.sin(self.heading), np.cos(self.heading)])
+        start = np.arctan2(self.xy[1] - centre[1], self.xy[0] - centre[0])
+        ang = start + side * u / radius_m
+        self._append(centre + radius_m * np.column_stack([np.cos(ang), np.sin(ang)]), u, height)
+        self.heading += sweep_rad

@@ -58,3 +58,10 @@ FAST_SCENES = ("tunnel", "canyon")
 def scene_params(names) -> list:
     """A per-scene parametrisation: ``FAST_SCENES`` as they are, every other scene marked slow."""
     return [n if n in FAST_SCENES else pytest.param(n, marks=pytest.mark.slow) for n in names]
+
+
+# What a vehicle passes under: anything at least this far above its roof-mounted lidar's optical
+# centre (the housing's top, about 0.1 m above it, and 0.2 m for the suspension and a bump), the
+# beams of a parking garage 0.4-1 m above the lidar included. The clearance checks of the scenes
+# (test_scenes, test_scenes_clearance) hold everything else to a car's width from the lidar.
+OVERHEAD_M = 0.3

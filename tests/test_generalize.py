@@ -6,12 +6,14 @@ import numpy as np
 import pytest
 from helpers import box_room, constant_velocity
 
+from scenes import build_scene
+from scenes.families import draw_family_params
 from simlidar.dataset import open_sequence
 from simlidar.in_memory import simulate_in_memory
 from simlidar.sensor import load_preset
 from simlidar.simulate import simulate_sequence
 from tools.experiments.generalize import GeneralizeParams, run_generalize, summarize
-from tools.family_suite import EVALUATION_SEEDS, KINDS, SENSORS, TUNING_SEEDS, suite, trajectory_figures
+from tools.family_suite import EVALUATION_SEEDS, KINDS, SENSORS, TUNING_SEEDS, suite, suite_world, trajectory_figures
 
 
 def test_in_memory_frames_are_the_written_ones(tmp_path):
@@ -61,6 +63,43 @@ def test_seed_split_and_what_the_suite_draws():
         GeneralizeParams(split="evaluation", seeds=(TUNING_SEEDS[0],))
     with pytest.raises(ValueError, match="unknown method"):
         GeneralizeParams(methods=("default", "loam"))
+
+
+# The evaluation split's draws before the garage and bridge families were added (family, seed,
+# sensor, noise, start): appending families must not change them.
+EVALUATION_DRAWS = [
+    ("city", 1, "hdl32e", 0.0102, 0.0), ("city", 2, "salo32", 0.0174, 4.19),
+    ("suburb", 1, "os1-64", 0.02, 4.03), ("suburb", 2, "narrow32", 0.0169, 3.33),
+    ("canyon", 1, "vlp16", 0.0177, None), ("canyon", 2, "hdl32e", 0.0108, None),
+    ("tunnel", 1, "salo32", 0.0196, None), ("tunnel", 2, "os1-64", 0.0293, None),
+    ("highway", 1, "narrow32", 0.0197, 8.19), ("highway", 2, "vlp16", 0.0232, 2.65),
+    ("open", 1, "hdl32e", 0.0245, 9.47), ("open", 2, "salo32", 0.0244, 0.0),
+    ("forest", 1, "os1-64", 0.0135, 4.08), ("forest", 2, "narrow32", 0.0222, 4.93),
+]
+
+
+def test_the_stacked_families_are_appended_with_the_sparse_sensors():
+    drawn = [(s.family, s.seed, s.sensor, s.noise_std_m, s.start_s) for s in suite(EVALUATION_SEEDS, kinds=("real",))]
+    assert drawn[:len(EVALUATION_DRAWS)] == EVALUATION_DRAWS
+    for seeds in (EVALUATION_SEEDS, TUNING_SEEDS):
+        for family in ("garage", "bridge"):
+            seqs = suite(seeds, families=(family,), kinds=("simulated",))
+            rings = [load_preset(s.sensor).rings for s in seqs]
+            assert set(rings) == {16, 32}, (family, seeds, rings)  # a 16-ring and a 32-ring sensor
+            assert all(s.start_s is None for s in seqs)  # placed by the path's feature
+
+
+@pytest.mark.parametrize("family, features", [("garage", ("climb_s",)), ("bridge", ("under_s", "over_s"))])
+def test_the_stacked_families_sequences_hold_their_feature(family, features):
+    # The garage's window holds its first climb off the ground floor; the bridge's both the pass
+    # under the deck and the pass over it.
+    for seq in suite(EVALUATION_SEEDS + TUNING_SEEDS, families=(family,), kinds=("real",)):
+        _, trajectory, sensor, start = suite_world(seq)
+        scene = build_scene(family, **draw_family_params(family, seq.seed))
+        end = start + seq.frames * sensor.sweep_period_s
+        for key in features:
+            t = float(trajectory.time_at_distance(scene.metadata[key])[0])
+            assert start + 1.0 <= t <= end - 0.5, (seq.name, key, start, t, end)
 
 
 def test_trajectory_figures_against_a_constructed_error():

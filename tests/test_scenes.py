@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 import trimesh
-from helpers import scene_params
+from helpers import OVERHEAD_M, scene_params
 
 import scenes
 from scenes import LABELS, build_scene
@@ -47,11 +47,15 @@ def frame_poses(scene) -> np.ndarray:
 
 
 def min_distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
-                         radius: float) -> np.ndarray:
+                         radius: float, ups: np.ndarray | None = None, overhead: float = np.inf,
+                         underfoot: float = np.inf) -> np.ndarray:
     """(n,) exact distance from each point to the nearest triangle, capped at ``radius``.
 
     Candidate triangles are those whose bounding box comes within ``radius`` of a
-    chunk of consecutive points; trimesh computes the exact closest points.
+    chunk of consecutive points; trimesh computes the exact closest points. With ``ups``
+    ((n, 3) unit vectors), a triangle whose closest point lies at least ``overhead`` m above
+    the point along its up vector does not count (a ceiling the vehicle passes under), nor
+    one whose closest point lies ``underfoot`` m or more below it (what the wheels roll over).
     """
     tri = vertices[faces]
     lo, hi = tri.min(axis=1), tri.max(axis=1)
@@ -63,8 +67,11 @@ def min_distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.nda
             continue
         P = np.repeat(p, len(cand), axis=0)
         closest = trimesh.triangles.closest_point(np.tile(tri[cand], (len(p), 1, 1)), P)
-        d = np.linalg.norm(closest - P, axis=1).reshape(len(p), len(cand)).min(axis=1)
-        out[chunk] = np.minimum(out[chunk], d)
+        d = np.linalg.norm(closest - P, axis=1)
+        if ups is not None:
+            above = np.einsum("ij,ij->i", closest - P, np.repeat(ups[chunk], len(cand), axis=0))
+            d = np.where((above >= overhead) | (above <= -underfoot), radius, d)
+        out[chunk] = np.minimum(out[chunk], d.reshape(len(p), len(cand)).min(axis=1))
     return out
 
 
@@ -168,9 +175,13 @@ def test_mesh_hash_is_the_same_in_a_fresh_interpreter():
     assert out.stdout.strip() == build_scene("open", seed=5).mesh_hash()
 
 
-@pytest.mark.parametrize("name", ["highway", pytest.param("forest", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("name", ["highway", pytest.param("forest", marks=pytest.mark.slow), "garage", "bridge"])
 def test_other_scenes_are_deterministic(name):
-    assert build_scene(name, seed=3).mesh_hash() == build_scene(name, seed=3).mesh_hash()
+    a, b = build_scene(name, seed=3), build_scene(name, seed=3)
+    assert a.mesh_hash() == b.mesh_hash()
+    t = np.linspace(0, a.trajectory.duration_s, 50)
+    np.testing.assert_array_equal(a.trajectory.pose_at(t), b.trajectory.pose_at(t))
+    assert build_scene(name, seed=4).mesh_hash() != a.mesh_hash()
 
 
 # ---------------------------------------------------------------- the sensor's clearance
@@ -206,23 +217,30 @@ def test_check_clear_fires_under_the_ground():
 # Clearances (m): the sensor keeps a car's half width (0.95 m) plus 0.5 m for mirrors and
 # the rack from every surface (the road itself is the mount height, 1.9 m, below it);
 # points of the body at 0.5 m and 1.2 m above the road keep the half width from everything
-# that is not a drivable surface.
+# that is not a drivable surface and stands above the road (a kerb counts; the edge of a
+# slab flush with the deck the vehicle drives onto does not: within ROAD_LEVEL_M of the road).
+# What lies ``OVERHEAD_M`` or more above the lidar (a garage's beams, a bridge deck) the
+# vehicle passes under: it counts for neither.
 SENSOR_CLEARANCE_M = 1.45
 BODY_HALF_WIDTH_M = 0.95
 DRIVABLE = ("road", "ground")
+ROAD_LEVEL_M = 0.05
 
 
 @pytest.mark.parametrize("name", scene_params(NAMES))
 def test_path_keeps_clear_of_all_geometry(name):
     s = default_scene(name)
     poses = frame_poses(s)
-    d_sensor = min_distance_to_mesh(poses[:, :3, 3], s.vertices, s.faces, 3.0)
+    ups = poses[:, :3, 2]
+    d_sensor = min_distance_to_mesh(poses[:, :3, 3], s.vertices, s.faces, 3.0, ups, OVERHEAD_M)
     assert d_sensor.min() >= SENSOR_CLEARANCE_M, f"frame {int(d_sensor.argmin())}: {d_sensor.min():.2f} m"
     solid = ~np.isin(s.label_of_face(), DRIVABLE)
     mount = s.params["mount_height_m"]
-    body = np.concatenate([poses[:, :3, 3] - poses[:, :3, 2] * (mount - h) for h in (0.5, 1.2)])
-    d_body = min_distance_to_mesh(body, s.vertices, s.faces[solid], 3.0)
-    assert d_body.min() >= BODY_HALF_WIDTH_M, f"{d_body.min():.2f} m"
+    for h in (0.5, 1.2):  # over these points the lidar's overhead line is mount - h higher
+        body = poses[:, :3, 3] - poses[:, :3, 2] * (mount - h)
+        d_body = min_distance_to_mesh(body, s.vertices, s.faces[solid], 3.0, ups, mount - h + OVERHEAD_M,
+                                      h - ROAD_LEVEL_M)
+        assert d_body.min() >= BODY_HALF_WIDTH_M, f"{h} m up, frame {int(d_body.argmin())}: {d_body.min():.2f} m"
 
 
 def test_clearance_helper_measures_exact_distances():
@@ -231,6 +249,17 @@ def test_clearance_helper_measures_exact_distances():
     pts = np.array([[0.0, 0.0, 2.5], [1.5, 1.5, 1.5], [0.0, 0.0, 9.0]])
     d = min_distance_to_mesh(pts, np.asarray(box.vertices), np.asarray(box.faces), 5.0)
     np.testing.assert_allclose(d, [2.0, np.sqrt(3.0), 5.0], atol=1e-9)
+    # Seen from below, the box is overhead: 1 m above a point under it, out of the count from
+    # 1 m of overhead up, and in it from 1.01 m; to a point beside it, it is not overhead.
+    below = np.array([[0.0, 0.0, -1.5], [1.5, 0.0, 0.0]])
+    ups = np.tile([0.0, 0.0, 1.0], (2, 1))
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    np.testing.assert_allclose(min_distance_to_mesh(below, v, f, 5.0, ups, 1.0), [5.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(min_distance_to_mesh(below, v, f, 5.0, ups, 1.01), [1.0, 1.0], atol=1e-9)
+    # ... and to a point 1 m above it, underfoot from 1 m down
+    above = np.array([[0.0, 0.0, 1.5]])
+    np.testing.assert_allclose(min_distance_to_mesh(above, v, f, 5.0, ups[:1], underfoot=1.0), [5.0], atol=1e-9)
+    np.testing.assert_allclose(min_distance_to_mesh(above, v, f, 5.0, ups[:1], underfoot=1.01), [1.0], atol=1e-9)
 
 
 # ---------------------------------------------------------------- scans

@@ -80,12 +80,16 @@ def test_hashes_and_draws_are_the_same_in_a_fresh_interpreter():
     code = ("import scenes; from scenes.families import draw_family_params as d; "
             "print(scenes.build_scene('suburb', seed=3, loop_length_m=350).mesh_hash()); "
             "print(scenes.build_scene('canyon', seed=3, street_length_m=60).mesh_hash()); "
-            "print(sorted(d('canyon', 11).items()))")
+            "print(sorted(d('canyon', 11).items())); "
+            "print(scenes.build_scene('garage', seed=3, levels=2).mesh_hash()); "
+            "print(scenes.build_scene('bridge', seed=3).mesh_hash())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.splitlines() == [
         build_scene("suburb", seed=3, loop_length_m=350).mesh_hash(),
         build_scene("canyon", seed=3, street_length_m=60).mesh_hash(),
         str(sorted(draw_family_params("canyon", 11).items())),
+        build_scene("garage", seed=3, levels=2).mesh_hash(),
+        build_scene("bridge", seed=3).mesh_hash(),
     ]
 
 
@@ -311,7 +315,8 @@ def test_canyon_facade_relief_adds_along_track_structure():
 
 # ---------------------------------------------------------------- families
 def test_families_are_the_suite_and_their_ranges_fit_the_scenes():
-    assert FAMILIES == ("city", "suburb", "canyon", "tunnel", "highway", "open", "forest")
+    # appended at the end: a family's place in the tuple sets its suite sensors (tools.family_suite)
+    assert FAMILIES == ("city", "suburb", "canyon", "tunnel", "highway", "open", "forest", "garage", "bridge")
     for name in FAMILIES:
         fam = families.family(name)
         assert family_scene(name) == fam.scene and fam.scene in scenes.SCENES

@@ -6,7 +6,9 @@ everywhere a method could be led by what it is handed:
 - by link target: every given path, and every entry below a given folder, that is a
   symbolic link is followed, and the folder it leads to searched;
 - by inode: a file with more than one name (a hard link) is another name of a file
-  somewhere; the trees above it are searched for a file of the same inode;
+  somewhere; the trees above it are searched for a file of the same inode, and the truth
+  beside each other name is taken (a git clone's hard-linked objects set this off too:
+  it then finds their other names and nothing else);
 - walking up: from every given path (arguments, the working folder, every path in an
   environment variable), each folder above it and its sub-folders two levels down are
   searched, as ``{scans}/../poses.txt`` or ``$(dirname $PWD)/*/poses.txt`` would;
@@ -32,7 +34,8 @@ REPORT_ENV = "SALO_CHEAT_REPORT"  # the test's, not the method's: never searched
 
 
 def _walk(top: str, depth: int | None, seen: set, found: set, inodes: set | None = None) -> int:
-    """Walk ``top`` down ``depth`` levels (None: all); collect truth-named files (and files of ``inodes``)."""
+    """Walk ``top`` down ``depth`` levels (None: all); collect truth-named files, or, given ``inodes``, the
+    files of those inodes and the truth-named files beside them."""
     examined = 0
     top_depth = top.rstrip(os.sep).count(os.sep)
     for folder, dirs, files in os.walk(top, followlinks=False):
@@ -49,7 +52,7 @@ def _walk(top: str, depth: int | None, seen: set, found: set, inodes: set | None
         for name in files:
             examined += 1
             path = os.path.join(folder, name)
-            if name in TRUTH_NAMES:
+            if name in TRUTH_NAMES and not inodes:  # the search for other names collects only those
                 found.add(path)
             if inodes:
                 try:

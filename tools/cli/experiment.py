@@ -154,8 +154,9 @@ def _add_generalize(sub) -> None:
         help="held-out suite: scene families x sensors x simulated/real-like data, with the peers",
         description="Run our odometry and the peers (KISS-ICP, GenZ-ICP, small_gicp scan-to-map, when the peer "
         "extra is installed) on the same in-memory frames of a suite of randomised scene families (city, suburb, "
-        "canyon, tunnel, highway, open, forest), sensors (vlp16, hdl32e, salo32, os1-64, narrow32) and two kinds "
-        "of data: 'simulated' (motion distortion, ring and per-point time given) and 'real' (x y z only, no "
+        "canyon, tunnel, highway, open, forest, garage, bridge), sensors (vlp16, hdl32e, salo32, os1-64, "
+        "narrow32) and two kinds of data: 'simulated' (motion distortion, ring and per-point time given) and "
+        "'real' (x y z only, no "
         "distortion). Parameters are chosen on the tuning seeds; report the evaluation seeds. Per family and "
         "kind: mean and spread of KITTI t_err, r_err, vertical drift, failures (t_err > 10 %), frames/s.",
     )
@@ -163,7 +164,7 @@ def _add_generalize(sub) -> None:
     p.add_argument("--split", choices=("tuning", "evaluation"), default="evaluation",
                    help="seed split (default evaluation; choose parameters on tuning)")
     p.add_argument("--seeds", help="comma-separated seeds instead of the split's (must not be the other split's)")
-    p.add_argument("--families", help="comma-separated families (default all seven)")
+    p.add_argument("--families", help="comma-separated families (default all nine)")
     p.add_argument("--kinds", default="simulated,real", help="simulated, real or both (default both)")
     p.add_argument("--weather", help="comma-separated weather conditions, each sequence in each (clear, light-fog, "
                    "dense-fog, rain, snow, or all; clear is the others' twin: docs/weather.md); default: the suite "
