@@ -1,0 +1,169 @@
+"""What the poles stage keeps of the weather, against the truth: structure poles and weather "poles".
+
+Fog's backscatter, raindrops and snowflakes return from a random range on a beam, and near the
+sensor each such return stands clear of its background: a pole by the pole rule. This tool runs
+the odometry's own preparation (``odometry.preparation.prepare_scan``, the default configuration,
+with ``poles.clutter_filter`` on and off) over consecutive scans of the weather suite and labels
+every pole by the truth of its nearest return (a weather return or a surface's). It then feeds the
+scans' poles, placed by the true poses, through the pole map (``odometry.poles.PoleMap``) to count
+what the map's target holds once the confirmation by a neighbouring frame is asked for.
+
+    python -m tools.pole_clutter --seeds 101 --frames 3 --out OUT
+
+prints a table per condition (poles per scan: of structure, of weather; the shares the isolation
+keeps; the target's poles after confirmation) and writes ``OUT/pole_clutter.csv`` (a row per
+sequence and condition).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import KDTree
+
+from odometry.config import DEFAULT_VARIANT, variant
+from odometry.poles import PoleMap
+from odometry.preparation import prepare_scan
+from scenes.families import FAMILIES
+from simlidar import se3
+from simlidar.formats.atomic import atomic_write_text
+from simlidar.in_memory import simulate_in_memory
+from tools.family_suite import TUNING_SEEDS, suite_world, weather_suite
+from tools.weather_conditions import CONDITIONS
+
+# The scans start this long after the sequence's start (the suite's sequences are placed in motion).
+OFFSET_S = 3.0
+
+
+@dataclass
+class Counts:
+    """Poles summed over a sequence's scans: all of them (``prepare_scan`` without the filter), the isolation's
+    (with it), and the pole map's target after the last scan with and without the confirmation."""
+
+    scans: int = 0
+    structure: int = 0
+    weather: int = 0
+    isolated_structure: int = 0
+    isolated_weather: int = 0
+    target_structure: int = 0
+    target_weather: int = 0
+    confirmed_structure: int = 0
+    confirmed_weather: int = 0
+
+
+def labelled_poles(frame, sensor, config):
+    """A frame's poles as the odometry's preparation finds them, world-free: (P, 3) sensor frame, m, and (P,)
+    bool, True where the nearest clean return is a weather return in the truth."""
+    prepared = prepare_scan(frame.points, frame.time_s, frame.ring, config, sensor, with_normals=False,
+                            with_poles=True)
+    poles = prepared.scan.poles
+    if frame.field("true_range_m") is None:
+        raise ValueError("the frame has no per-return truth: simulate with fields='truth'")
+    weather = frame.field("weather")  # absent in clear air: every return is a surface's
+    weather = np.zeros(len(frame.points)) if weather is None else weather
+    if len(poles) == 0:
+        return poles.points.reshape(0, 3), np.zeros(0, dtype=bool)
+    clean_weather = np.asarray(weather)[prepared.clean.kept_rows] > 0
+    _, nearest = KDTree(prepared.clean.points).query(poles.points)
+    return poles.points, clean_weather[nearest]
+
+
+def _map_counts(poles_world: list[np.ndarray], labels: list[np.ndarray], confirmed_only: bool) -> tuple[int, int]:
+    """(structure, weather) poles of the pole map's target after every scan's poles went in."""
+    pole_map = PoleMap(frames_kept=len(poles_world), confirmed_only=confirmed_only)
+    for points in poles_world:
+        pole_map.add(points)
+    target = pole_map.target()
+    if target is None:
+        return 0, 0
+    every, every_label = np.vstack(poles_world), np.concatenate(labels)
+    _, row = KDTree(every).query(target.points)
+    weather = int(every_label[row].sum())
+    return len(target.points) - weather, weather
+
+
+def count_sequence(spec, frames: int) -> Counts:
+    """Counts over ``frames`` consecutive scans of a weather-suite sequence ``spec``."""
+    world, trajectory, sensor, start_s = suite_world(spec)
+    seq = simulate_in_memory(world, trajectory, sensor, frames, seed=spec.seed, t_start=start_s + OFFSET_S,
+                             fields="truth")
+    on = variant(DEFAULT_VARIANT)
+    off = replace(on, poles=replace(on.poles, clutter_filter=False))
+    on = replace(on, poles=replace(on.poles, clutter_filter=True))
+    c = Counts(scans=len(seq))
+    every, every_labels, isolated, isolated_labels = [], [], [], []
+    for k in range(len(seq)):
+        frame = seq[k]
+        points, weather = labelled_poles(frame, sensor, off)
+        c.structure += int((~weather).sum())
+        c.weather += int(weather.sum())
+        every.append(se3.transform_points(seq.poses[k], points))
+        every_labels.append(weather)
+        points, weather = labelled_poles(frame, sensor, on)
+        c.isolated_structure += int((~weather).sum())
+        c.isolated_weather += int(weather.sum())
+        isolated.append(se3.transform_points(seq.poses[k], points))
+        isolated_labels.append(weather)
+    c.target_structure, c.target_weather = _map_counts(every, every_labels, confirmed_only=False)
+    c.confirmed_structure, c.confirmed_weather = _map_counts(isolated, isolated_labels, confirmed_only=True)
+    return c
+
+
+def _share(part: int, whole: int) -> str:
+    return f"{100.0 * part / whole:.1f} %" if whole else "-"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m tools.pole_clutter", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", default=",".join(map(str, TUNING_SEEDS[:1])), help="comma-separated suite seeds")
+    ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families")
+    ap.add_argument("--conditions", default=",".join(c for c in CONDITIONS if c != "clear"),
+                    help="comma-separated weather conditions (clear included: the twins)")
+    ap.add_argument("--frames", type=int, default=3, help="consecutive scans per sequence (the pole map's frames)")
+    ap.add_argument("--out", type=Path, required=True, help="folder for pole_clutter.csv")
+    args = ap.parse_args(argv)
+    if args.frames < 1:
+        ap.error("--frames must be at least 1")
+    try:
+        seeds = tuple(int(s) for s in args.seeds.split(","))
+        specs = weather_suite(seeds, 200, tuple(args.families.split(",")), tuple(args.conditions.split(",")))
+    except ValueError as exc:
+        print(f"pole_clutter: {exc}", file=sys.stderr)
+        return 2
+    rows, totals = [], {}
+    for i, spec in enumerate(specs, 1):
+        print(f"[{i}/{len(specs)}] {spec.family} seed {spec.seed} {spec.sensor} {spec.weather}", file=sys.stderr,
+              flush=True)
+        c = count_sequence(spec, args.frames)
+        rows.append({"family": spec.family, "seed": spec.seed, "sensor": spec.sensor, "condition": spec.weather,
+                     **vars(c)})
+        t = totals.setdefault(spec.weather, Counts())
+        for key, value in vars(c).items():
+            setattr(t, key, getattr(t, key) + value)
+    args.out.mkdir(parents=True, exist_ok=True)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(args.out / "pole_clutter.csv", text.getvalue())
+    print("| condition | scans | structure poles / scan | kept by isolation | weather poles / scan | kept by isolation "
+          "| map target, weather (no filter) | map target, weather (isolated + confirmed) | structure in it |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for cond, t in totals.items():
+        print(f"| {cond} | {t.scans} | {t.structure / t.scans:.1f} | {_share(t.isolated_structure, t.structure)} "
+              f"| {t.weather / t.scans:.1f} | {_share(t.isolated_weather, t.weather)} "
+              f"| {_share(t.target_weather, t.target_weather + t.target_structure)} "
+              f"| {_share(t.confirmed_weather, t.confirmed_weather + t.confirmed_structure)} "
+              f"| {_share(t.confirmed_structure, t.target_structure)} |")
+    print(f"rows: {args.out / 'pole_clutter.csv'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
