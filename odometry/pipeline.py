@@ -405,7 +405,7 @@ class Odometry:
             points_world = map_points(scan, pose)
             st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(points_world, alignment))
         if st.pole_map is not None and scan.poles is not None:
-            st.pole_map.add(se3.transform_points(pose, scan.poles.points))
+            st.pole_map.add(se3.transform_points(pose, scan.poles.points), scan.poles.cluttered)
         stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
         frame.seconds[stage] = frame.seconds.get(stage, 0.0) + time.perf_counter() - t
 
@@ -490,7 +490,8 @@ class Odometry:
             st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
         if st.pole_map is not None and st.target_scan.poles is not None:
             st.pole_map = self._new_pole_map()
-            st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points))
+            st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points),
+                            st.target_scan.poles.cluttered)
 
     def _map_nearest_m(self, points_world: np.ndarray, alignment: Alignment) -> np.ndarray | None:
         """(N,) each world point's distance to its nearest map point, inf beyond the match bound, m: the

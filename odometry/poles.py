@@ -64,9 +64,14 @@ MAX_COLUMN_GAP = 2
 ISOLATION_RADIUS_M = 0.5
 SAME_OBJECT_COLUMNS = 3
 CROWD_NEIGHBOURS = 16  # (a post on more rings than this is as crowded as it is alone: it passes)
-# What clutter is left is sparse and random from scan to scan; a post is where it was. A pole of the
-# pole map is a target once a pole of the frame before or after it lies within CONFIRM_RADIUS_M (as
-# the first registration's poles agree on an offset, CONSENSUS_RADIUS_M).
+# The rule engages only on a cluttered scan, one whose poles are mostly crowded: a clear scan keeps
+# its poles as they were (a wood's trunks may stand close together). On the tuning seeds (seed 101,
+# every family, both kinds, three scans each) the crowded share of a scan's poles was at most 0.25
+# in clear air (forest) and in rain, and at least 0.69 in light fog, 0.87 in snow, 0.99 in dense fog.
+CLUTTERED_SHARE = 0.5
+# What clutter is left is sparse and random from scan to scan; a post is where it was. A pole of a
+# cluttered scan is a target of the pole map once a pole of the frame before or after it lies within
+# CONFIRM_RADIUS_M (as the first registration's poles agree on an offset, CONSENSUS_RADIUS_M).
 CONFIRM_RADIUS_M = 0.25
 # The first registration: poles that agree on an offset within this, m, and how many must.
 CONSENSUS_RADIUS_M = 0.25
@@ -83,12 +88,13 @@ ALIAS_VOTE_RATIO = 0.75
 @dataclass
 class Poles:
     """A scan's poles. points: (P, 3) run centroids, sensor frame, m; counts: (P,) returns in each run;
-    times_s: (P,) their mean firing time, s, or None (the scan has no per-point times); crowded: how many
-    runs were dropped for standing among others (``crowded``)."""
+    times_s: (P,) their mean firing time, s, or None (the scan has no per-point times); cluttered: the
+    scan's poles were mostly crowded (``CLUTTERED_SHARE``), and ``crowded`` of them were dropped."""
 
     points: np.ndarray
     counts: np.ndarray
     times_s: np.ndarray | None = None
+    cluttered: bool = False
     crowded: int = 0
 
     def __len__(self) -> int:
@@ -96,13 +102,13 @@ class Poles:
 
 
 def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns: int, max_width_m: float,
-                  times_s: np.ndarray | None = None, isolated_only: bool = False) -> Poles:
+                  times_s: np.ndarray | None = None, clutter_filter: bool = False) -> Poles:
     """The poles of a raw scan (module doc).
 
     points: (N, 3) as measured (or de-skewed), sensor frame, m; rings: (N,) int, 0 the lowest;
     n_rings, n_columns: the sensor's rings and azimuth columns per sweep; max_width_m: the widest
-    run kept, m; times_s: (N,) firing times, s, or None. isolated_only: drop the poles that
-    ``crowded`` finds among others (weather clutter).
+    run kept, m; times_s: (N,) firing times, s, or None. clutter_filter: on a cluttered scan (more
+    than ``CLUTTERED_SHARE`` of its poles ``crowded`` among others: weather), drop the crowded ones.
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     image = range_image(rings, points, n_rings, n_columns)
@@ -110,12 +116,14 @@ def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns
     centroids, counts, mean_times = foreground_runs(
         image, points, times, 2.0 * math.pi / n_columns, float(max_width_m), MIN_GAP_M, GAP_FRACTION,
         RUN_TOLERANCE_M, RUN_TOLERANCE_FRACTION, MAX_COLUMN_GAP)
-    dropped = 0
-    if isolated_only and len(centroids):
-        keep = ~crowded(centroids, n_columns)
-        dropped = int(len(keep) - keep.sum())
-        centroids, counts, mean_times = centroids[keep], counts[keep], mean_times[keep]
-    return Poles(centroids, counts, None if times_s is None else mean_times, dropped)
+    cluttered, dropped = False, 0
+    if clutter_filter and len(centroids):
+        among = crowded(centroids, n_columns)
+        cluttered = bool(among.mean() > CLUTTERED_SHARE)
+        if cluttered:
+            dropped = int(among.sum())
+            centroids, counts, mean_times = centroids[~among], counts[~among], mean_times[~among]
+    return Poles(centroids, counts, None if times_s is None else mean_times, cluttered, dropped)
 
 
 def crowded(points: np.ndarray, n_columns: int, radius_m: float = ISOLATION_RADIUS_M,
@@ -160,9 +168,10 @@ def horizontal(points: np.ndarray) -> np.ndarray:
 class PoleMap:
     """The poles of the last ``frames_kept`` frames, in the world frame (the first scan's).
 
-    confirmed_only: a pole is a target once confirmed, a pole of the frame before or after it lying
-    within ``CONFIRM_RADIUS_M`` horizontally (while the map holds one frame, every pole is: the first
-    registration's own consensus confirms them); else every pole is.
+    confirmed_only: a pole of a cluttered frame (``add``) is a target once confirmed, a pole of the frame
+    before or after it lying within ``CONFIRM_RADIUS_M`` horizontally (while the map holds one frame,
+    every pole is: the first registration's own consensus confirms them); a clear frame's poles are
+    targets at once. Without it every pole is.
     """
 
     def __init__(self, frames_kept: int, confirmed_only: bool = False):
@@ -171,14 +180,16 @@ class PoleMap:
         self._frames: deque[np.ndarray] = deque(maxlen=frames_kept)
         self._confirmed: deque[np.ndarray] = deque(maxlen=frames_kept)
 
-    def add(self, points_world: np.ndarray) -> None:
-        """One frame's poles (P, 3), world frame, m (an empty frame counts as a frame)."""
+    def add(self, points_world: np.ndarray, cluttered: bool = False) -> None:
+        """One frame's poles (P, 3), world frame, m (an empty frame counts as a frame); cluttered: they wait
+        for a neighbouring frame's confirmation (``Poles.cluttered``)."""
         points = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
-        confirmed = np.zeros(len(points), dtype=bool)
-        if self.confirmed_only and self._frames and len(points) and len(self._frames[-1]):
+        confirmed = np.full(len(points), not cluttered)
+        waiting = cluttered or (self._frames and not self._confirmed[-1].all())  # (clear air: nothing to confirm)
+        if self.confirmed_only and waiting and self._frames and len(points) and len(self._frames[-1]):
             before = self._frames[-1]
             d, _ = KDTree(horizontal(before)).query(horizontal(points), distance_upper_bound=CONFIRM_RADIUS_M)
-            confirmed = np.isfinite(d)
+            confirmed |= np.isfinite(d)
             d, _ = KDTree(horizontal(points)).query(horizontal(before), distance_upper_bound=CONFIRM_RADIUS_M)
             self._confirmed[-1] |= np.isfinite(d)
         self._frames.append(points)

@@ -10,9 +10,9 @@ what the map's target holds once the confirmation by a neighbouring frame is ask
 
     python -m tools.pole_clutter --seeds 101 --frames 3 --out OUT
 
-prints a table per condition (poles per scan: of structure, of weather; the shares the isolation
-keeps; the target's poles after confirmation) and writes ``OUT/pole_clutter.csv`` (a row per
-sequence and condition).
+prints a table per condition (scans the filter found cluttered; poles per scan: of structure, of
+weather, and the shares the filter keeps; the target's poles after confirmation) and writes
+``OUT/pole_clutter.csv`` (a row per sequence and condition).
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ class Counts:
     (with it), and the pole map's target after the last scan with and without the confirmation."""
 
     scans: int = 0
+    cluttered: int = 0
     structure: int = 0
     weather: int = 0
     isolated_structure: int = 0
@@ -58,8 +59,8 @@ class Counts:
 
 
 def labelled_poles(frame, sensor, config):
-    """A frame's poles as the odometry's preparation finds them, world-free: (P, 3) sensor frame, m, and (P,)
-    bool, True where the nearest clean return is a weather return in the truth."""
+    """A frame's poles as the odometry's preparation finds them: (P, 3) sensor frame, m; (P,) bool, True where
+    the nearest clean return is a weather return in the truth; whether the scan was cluttered."""
     prepared = prepare_scan(frame.points, frame.time_s, frame.ring, config, sensor, with_normals=False,
                             with_poles=True)
     poles = prepared.scan.poles
@@ -68,17 +69,19 @@ def labelled_poles(frame, sensor, config):
     weather = frame.field("weather")  # absent in clear air: every return is a surface's
     weather = np.zeros(len(frame.points)) if weather is None else weather
     if len(poles) == 0:
-        return poles.points.reshape(0, 3), np.zeros(0, dtype=bool)
+        return poles.points.reshape(0, 3), np.zeros(0, dtype=bool), poles.cluttered
     clean_weather = np.asarray(weather)[prepared.clean.kept_rows] > 0
     _, nearest = KDTree(prepared.clean.points).query(poles.points)
-    return poles.points, clean_weather[nearest]
+    return poles.points, clean_weather[nearest], poles.cluttered
 
 
-def _map_counts(poles_world: list[np.ndarray], labels: list[np.ndarray], confirmed_only: bool) -> tuple[int, int]:
-    """(structure, weather) poles of the pole map's target after every scan's poles went in."""
-    pole_map = PoleMap(frames_kept=len(poles_world), confirmed_only=confirmed_only)
-    for points in poles_world:
-        pole_map.add(points)
+def _map_counts(poles_world: list[np.ndarray], labels: list[np.ndarray], cluttered: list[bool] | None
+                ) -> tuple[int, int]:
+    """(structure, weather) poles of the pole map's target after every scan's poles went in; cluttered: each
+    scan's flag, with the confirmation asked for (None: without it)."""
+    pole_map = PoleMap(frames_kept=len(poles_world), confirmed_only=cluttered is not None)
+    for k, points in enumerate(poles_world):
+        pole_map.add(points, cluttered is not None and cluttered[k])
     target = pole_map.target()
     if target is None:
         return 0, 0
@@ -97,21 +100,23 @@ def count_sequence(spec, frames: int) -> Counts:
     off = replace(on, poles=replace(on.poles, clutter_filter=False))
     on = replace(on, poles=replace(on.poles, clutter_filter=True))
     c = Counts(scans=len(seq))
-    every, every_labels, isolated, isolated_labels = [], [], [], []
+    every, every_labels, isolated, isolated_labels, cluttered = [], [], [], [], []
     for k in range(len(seq)):
         frame = seq[k]
-        points, weather = labelled_poles(frame, sensor, off)
+        points, weather, _ = labelled_poles(frame, sensor, off)
         c.structure += int((~weather).sum())
         c.weather += int(weather.sum())
         every.append(se3.transform_points(seq.poses[k], points))
         every_labels.append(weather)
-        points, weather = labelled_poles(frame, sensor, on)
+        points, weather, is_cluttered = labelled_poles(frame, sensor, on)
+        c.cluttered += int(is_cluttered)
         c.isolated_structure += int((~weather).sum())
         c.isolated_weather += int(weather.sum())
         isolated.append(se3.transform_points(seq.poses[k], points))
         isolated_labels.append(weather)
-    c.target_structure, c.target_weather = _map_counts(every, every_labels, confirmed_only=False)
-    c.confirmed_structure, c.confirmed_weather = _map_counts(isolated, isolated_labels, confirmed_only=True)
+        cluttered.append(is_cluttered)
+    c.target_structure, c.target_weather = _map_counts(every, every_labels, None)
+    c.confirmed_structure, c.confirmed_weather = _map_counts(isolated, isolated_labels, cluttered)
     return c
 
 
@@ -152,11 +157,12 @@ def main(argv: list[str] | None = None) -> int:
     writer.writeheader()
     writer.writerows(rows)
     atomic_write_text(args.out / "pole_clutter.csv", text.getvalue())
-    print("| condition | scans | structure poles / scan | kept by isolation | weather poles / scan | kept by isolation "
-          "| map target, weather (no filter) | map target, weather (isolated + confirmed) | structure in it |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| condition | scans | cluttered | structure poles / scan | kept | weather poles / scan | kept "
+          "| map target, weather (no filter) | map target, weather (filter) | structure in it |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for cond, t in totals.items():
-        print(f"| {cond} | {t.scans} | {t.structure / t.scans:.1f} | {_share(t.isolated_structure, t.structure)} "
+        print(f"| {cond} | {t.scans} | {t.cluttered} | {t.structure / t.scans:.1f} "
+              f"| {_share(t.isolated_structure, t.structure)} "
               f"| {t.weather / t.scans:.1f} | {_share(t.isolated_weather, t.weather)} "
               f"| {_share(t.target_weather, t.target_weather + t.target_structure)} "
               f"| {_share(t.confirmed_weather, t.confirmed_weather + t.confirmed_structure)} "
