@@ -18,6 +18,7 @@ own while the current one registers: the same poses, both cores at work. The ope
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import threading
@@ -33,7 +34,7 @@ import numpy as np
 from simlidar import se3
 from simlidar.formats.scan_folders import Sequence
 from simlidar.sensor import LidarModel
-from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times
+from simlidar.sequence import DEFAULT_FRAME_PERIOD_S, Frame, deskew_times, method_frame
 
 from .cold_start import better_constrained, coarse_config, first_registration
 from .config import OdometryConfig
@@ -575,10 +576,17 @@ def _prefetcher(threads: int) -> ThreadPoolExecutor:
         return _prefetchers[key]
 
 
-def prepared_scans(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int | None = None
-                   ) -> Iterator[tuple[ScanInput, PreparedScan]]:
+def _read_and_prepare(odometry: Odometry, scan, first: bool) -> tuple[ScanInput, PreparedScan]:
+    """A scan (read first when it is a function that reads it) and its preparation."""
+    scan = scan() if callable(scan) else scan
+    return scan, odometry.prepare(scan.points, scan.times_s, scan.rings, first=first)
+
+
+def prepared_scans(odometry: Odometry, scans: Iterable[ScanInput | Callable[[], ScanInput]],
+                   prefetch: int | None = None) -> Iterator[tuple[ScanInput, PreparedScan]]:
     """Each of ``scans`` in order with its preparation (``Odometry.prepare``), for the caller to register.
 
+    scans: ScanInputs, or functions that read one (``scan_inputs``: read ahead with the preparation).
     prefetch: scans prepared ahead, each on a thread of its own, while the caller registers the
     current one (0: none, one thing at a time; None: ``default_prefetch`` of the odometry's config).
     A preparation reads no state, so the poses are those of one scan after another. ``scans`` is
@@ -606,8 +614,7 @@ def prepared_scans(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int
             except Exception as exc:  # noqa: BLE001 - raised in its turn, after the scans before it
                 ended, error = True, exc
                 return
-            job = None if pool is None else pool.submit(odometry.prepare, scan.points, scan.times_s, scan.rings,
-                                                        first=first)
+            job = None if pool is None else pool.submit(_read_and_prepare, odometry, scan, first)
             pending.append((scan, job, first))
             first = False
 
@@ -615,8 +622,7 @@ def prepared_scans(odometry: Odometry, scans: Iterable[ScanInput], prefetch: int
         top_up()
         while pending:
             scan, job, is_first = pending.popleft()
-            prepared = (job.result() if job is not None
-                        else odometry.prepare(scan.points, scan.times_s, scan.rings, first=is_first))
+            scan, prepared = job.result() if job is not None else _read_and_prepare(odometry, scan, is_first)
             if pool is not None:
                 top_up()  # (the next preparations start before this registration)
             yield scan, prepared
@@ -665,12 +671,20 @@ def frames_of(sequence: Sequence, frames: slice | None = None) -> np.ndarray:
     return idx
 
 
-def scan_inputs(sequence: Sequence, idx: np.ndarray) -> Iterator[ScanInput]:
-    """The frames ``idx`` of a sequence as the odometry takes them (read one at a time)."""
-    for k in idx:
-        frame = sequence[int(k)]
+def scan_inputs(sequence: Sequence, idx: np.ndarray) -> Iterator[Callable[[], ScanInput]]:
+    """The frames ``idx`` of a sequence as the odometry takes them: for each, a function that reads it
+    (``prepared_scans`` calls it on a preparing thread, so reading overlaps the registration; the reads
+    are taken one at a time, as a reader with one open file needs)."""
+    lock = threading.Lock()
+
+    def read(k: int) -> ScanInput:
+        with lock:
+            frame = method_frame(sequence, k)
         stamp = float(sequence.times[k]) if sequence.times is not None and k < len(sequence.times) else None
-        yield ScanInput(frame.points, deskew_times(sequence, frame), frame.ring, stamp)
+        return ScanInput(frame.points, deskew_times(sequence, frame), frame.ring, stamp)
+
+    for k in idx:
+        yield functools.partial(read, int(k))
 
 
 def run_sequence(

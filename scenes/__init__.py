@@ -19,7 +19,23 @@ import time
 from types import ModuleType
 from typing import Any
 
-from . import bare_tunnel, bridge, canyon, city, forest, garage, highway, open_field, suburb, tunnel
+from . import (
+    bare_tunnel,
+    bridge,
+    canyon,
+    city,
+    forest,
+    garage,
+    highway,
+    lead_vehicle,
+    open_field,
+    overtaking_lorry,
+    red_light,
+    suburb,
+    traffic,
+    traffic_jam,
+    tunnel,
+)
 from .base import LABELS, MeshBuilder, Scene
 from .params import ParamInfo, describe, resolve, scene_section
 
@@ -36,6 +52,10 @@ SCENES: dict[str, ModuleType] = {
     "garage": garage,
     "bridge": bridge,
     "bare-tunnel": bare_tunnel,
+    "red_light": red_light,
+    "traffic_jam": traffic_jam,
+    "overtaking_lorry": overtaking_lorry,
+    "lead_vehicle": lead_vehicle,
 }
 
 
@@ -67,9 +87,11 @@ def build_scene(name: str, seed: int = 0, **overrides: Any) -> Scene:
     params = resolve_params(name, seed, **overrides)
     start = time.perf_counter()
     scene = _module(name).build(params)
-    log.info("built %s (seed %d): %d triangles, %d objects, %.1f s of trajectory in %.2f s",
-             name, params.seed, scene.n_triangles, len(scene.object_labels), scene.trajectory.duration_s,
-             time.perf_counter() - start)
+    if scene.actors is None:  # the scene placed none itself: the traffic of its densities, or nothing
+        scene.actors = traffic.populate(scene, params.traffic, params.seed) if params.traffic.enabled else []
+    log.info("built %s (seed %d): %d triangles, %d objects, %d moving, %.1f s of trajectory in %.2f s",
+             name, params.seed, scene.n_triangles, len(scene.object_labels), len(scene.actors),
+             scene.trajectory.duration_s, time.perf_counter() - start)
     return scene
 
 

@@ -16,7 +16,7 @@ import numpy as np
 # The labels a scene may use (the simulator maps each to a reflectance).
 LABELS = (
     "ground", "road", "sidewalk", "kerb", "building", "wall", "roof", "vehicle",
-    "pole", "sign", "vegetation", "rock", "rail", "light", "object",
+    "pole", "sign", "vegetation", "rock", "rail", "light", "object", "person",
 )
 
 
@@ -42,6 +42,9 @@ class Scene:
     trajectory: lidar poses along ``path`` (``pose_at``, ``duration_s``).
     params: resolved parameters, seed included.
     metadata: anything else a user or a test needs (spans, axes, lengths).
+    roads: where traffic may go (``scenes.traffic.RoadLayout``), or None: a scene without lanes.
+    actors: its moving objects (``scenes.actors.Actor``), put in by ``scenes.build_scene`` when the
+        ``traffic`` section is enabled (a scene module may place its own: the stress scenes); None: none yet.
     """
 
     name: str
@@ -53,6 +56,8 @@ class Scene:
     trajectory: PoseSource
     params: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+    roads: object | None = None
+    actors: list | None = None
 
     @property
     def n_triangles(self) -> int:

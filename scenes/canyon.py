@@ -34,6 +34,7 @@ from . import geometry as g
 from . import paths, props, tunnel
 from .base import MeshBuilder, Scene, check_budget
 from .params import CommonParams, ParamError, param
+from .traffic import two_way_road
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "street canyon of continuous tall facades leading into a tunnel, open road after it"
@@ -151,8 +152,11 @@ def build(p: Params) -> Scene:
     i_mid = (i_in + i_out) // 2 + i0
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
+    roads = two_way_road(p.lane_offset_m, p.street_width_m / 2, False, None, p.street_width_m / 2 - PARK_FROM_KERB_M,
+                         CAR_HALF_WIDTH_M, p.sidewalk_width_m, p.kerb_height_m,
+                         pavement_spans=((0.0, float(s_path[i_in]) - RAMP_M - 5.0),))
     return Scene(
-        "canyon", v, f, ids, labels, path, traj, p.to_dict(),
+        "canyon", v, f, ids, labels, path, traj, p.to_dict(), roads=roads, metadata=
         {
             "street_s": [0.0, float(s_path[i_in])],
             "portal_s": [float(s_path[i_in]), float(s_path[i_out])],

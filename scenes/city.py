@@ -26,6 +26,7 @@ from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
 from .params import CommonParams, ParamError, param
+from .traffic import Lane, RoadLayout
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "street grid of blocks with varied buildings, parked cars, poles, trees; a loop route"
@@ -130,8 +131,9 @@ def build(p: Params) -> Scene:
     )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
+    roads = _roads(p, terrain, sx, sy, route, closed, path)
     return Scene(
-        "city", v, f, ids, labels, path, traj, p.to_dict(),
+        "city", v, f, ids, labels, path, traj, p.to_dict(), roads=roads, metadata=
         {
             "route_length_m": traj.length_m,
             "route_corners_xy": route.tolist(),
@@ -141,6 +143,70 @@ def build(p: Params) -> Scene:
             "parked_cars": n_cars,
         },
     )
+
+
+# ---------------------------------------------------------------- traffic
+def _roads(p: Params, terrain, sx: np.ndarray, sy: np.ndarray, route: np.ndarray, closed: bool,
+           path: np.ndarray) -> RoadLayout:
+    """Where the city's traffic goes (``scenes.traffic``): the two lanes of the route's streets, the parking
+    lanes, the cyclists' lines, the sidewalks around the route's blocks, the crossings at its junctions and the
+    streets that cross it."""
+    half, lo = p.street_width_m / 2, p.lane_offset_m
+    lateral = half - 1.1  # a parked car's centre (``_parked_cars``)
+    parks = lateral - 0.95 - lo >= 0.95 + 0.5
+    walk = half + 0.65 * p.sidewalk_width_m  # the walking line, from the street's centre
+
+    def on_block(x, y):
+        return (np.abs(x[:, None] - sx[None, 1:-1]).min(axis=1) > half) & (
+            np.abs(y[:, None] - sy[None, 1:-1]).min(axis=1) > half)
+
+    def surface(x, y):  # the sidewalk where it is one, else the road
+        return terrain(x, y) + np.where(on_block(x, y), p.kerb_height_m, 0.0)
+
+    walkways = []
+    corners = np.asarray(route, float)
+    for side in (1.0, -1.0):
+        loop = paths.resample(paths.fillet(_offset_polygon(corners, side * walk), 1.5, closed=True), 0.5, closed=True)
+        walkways.append((np.column_stack([loop, surface(loop[:, 0], loop[:, 1])]), True))
+    junctions = [(x, y) for x in sx[1:-1] for y in sy[1:-1] if _on_loop(corners, np.array([x, y]))]
+    crossings, streets = [], {}
+    x_lo, x_hi, y_lo, y_hi = sx[0] + half, sx[-1] - half, sy[0] + half, sy[-1] - half
+    for x, y in junctions:
+        for u in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+            u = np.array(u)
+            n = np.array([-u[1], u[0]])
+            c = np.array([x, y]) + (half + 2.0) * u
+            a, b = c + walk * n, c - walk * n
+            crossings.append(tuple(np.array([*q, float(terrain(q[:1], q[1:])[0]) + p.kerb_height_m]) for q in (a, b)))
+        streets[("x", x)] = np.column_stack([np.full(200, x), np.linspace(y_lo + 2.0, y_hi - 2.0, 200)])
+        streets[("y", y)] = np.column_stack([np.linspace(x_lo + 2.0, x_hi - 2.0, 200), np.full(200, y)])
+    cross_streets = [(np.column_stack([xy, terrain(xy[:, 0], xy[:, 1])]), lo) for xy in streets.values()]
+    # where the path meets a junction, its lanes' traffic may queue: a stop line before each
+    path_xy = path[:, :2]
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path_xy, axis=0), axis=1))])
+    stop_lines = tuple(float(along[np.argmin(np.linalg.norm(path_xy - np.array([x, y]), axis=1))]) - half - 3.0
+                       for x, y in junctions)
+    return RoadLayout(
+        lanes=(Lane(0.0, 1), Lane(2 * lo, -1)), closed=closed, height=terrain, stop_lines=stop_lines,
+        parking=(lo - lateral, lo + lateral) if parks else (),
+        cyclists=((-min(1.4, half - lo - 0.6), 1), (2 * lo + min(1.4, half - lo - 0.6), -1)),
+        walkways=walkways, crossings=crossings, cross_streets=cross_streets)
+
+
+def _offset_polygon(corners: np.ndarray, d: float) -> np.ndarray:
+    """The corners of a closed polyline of axis-parallel and collinear edges, moved ``d`` to the left of travel."""
+    nxt = np.roll(corners, -1, axis=0) - corners
+    n = np.stack([-nxt[:, 1], nxt[:, 0]], 1) / np.linalg.norm(nxt, axis=1, keepdims=True)
+    prev = np.roll(n, 1, axis=0)
+    return corners + d * (prev + n) / (1.0 + np.sum(prev * n, axis=1, keepdims=True))
+
+
+def _on_loop(corners: np.ndarray, q: np.ndarray) -> bool:
+    """Whether point q lies on the closed polyline through ``corners``."""
+    a, b = corners, np.roll(corners, -1, axis=0)
+    ab = b - a
+    t = np.clip(np.sum((q - a) * ab, 1) / np.maximum(np.sum(ab * ab, 1), 1e-12), 0.0, 1.0)
+    return bool(np.min(np.linalg.norm(a + t[:, None] * ab - q, axis=1)) < 1e-6)
 
 
 # ---------------------------------------------------------------- blocks

@@ -210,11 +210,13 @@ def family_scene(name: str) -> str:
     return family(name).scene
 
 
-def draw_family_params(name: str, seed: int) -> dict[str, Any]:
+def draw_family_params(name: str, seed: int, traffic: bool = False) -> dict[str, Any]:
     """Parameter overrides of one member of family ``name``, drawn from ``seed``.
 
     Returns ``{"seed": seed, parameter: value, ...}`` for ``scenes.build_scene(family_scene(name),
-    **overrides)``; numbers are clipped to the scene's parameter bounds (integers rounded).
+    **overrides)``; numbers are clipped to the scene's parameter bounds (integers rounded). traffic: with
+    the family's moving traffic (``scenes.traffic.draw_traffic``: densities of a draw of their own, so the
+    rest is the member without traffic, its static twin); a family without traffic is refused.
     """
     fam = family(name)
     seed = int(seed)
@@ -232,6 +234,13 @@ def draw_family_params(name: str, seed: int) -> dict[str, Any]:
             value = float(np.clip(value, lo, hi))
             value = int(round(value)) if info.type == "int" else value
         out[key] = value
+    if traffic:
+        from .traffic import draw_traffic
+
+        section = draw_traffic(name, seed)
+        if section is None:
+            raise ValueError(f"scene family {name!r} has no traffic")
+        out["traffic"] = section
     return out
 
 

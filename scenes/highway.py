@@ -21,6 +21,7 @@ from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
 from .params import CommonParams, ParamError, param
+from .traffic import Lane, RoadLayout
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "divided multi-lane highway with guard rails, sparse signs and gantries, open land"
@@ -50,6 +51,8 @@ class Params(CommonParams):
                                     min=0.0, max=20000.0)
     land_roughness_m: float = param(3.0, "standard deviation of the land's relief", min=0.0, max=30.0)
     tree_groups: int = param(25, "groups of trees scattered in the land", min=0, max=1000)
+    rail_post_spacing_m: float = param(4.0, "spacing of the guard rails' posts (0: a bare beam)", min=0.0, max=100.0)
+    written_when_set = (*CommonParams.written_when_set, "rail_post_spacing_m")  # added with the stress scenes
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -101,7 +104,7 @@ def build(p: Params) -> Scene:
         rail = mb.new_object("rail")
         off = side * (edge + 0.4)
         mb.add(*g.sweep(c, lv, beam + [off, 0.0], closed=True), rail)
-        for i in range(0, len(s), int(round(4.0 / STEP_M))):
+        for i in range(0, len(s), int(round(p.rail_post_spacing_m / STEP_M)) or len(s) + 1):
             q = road.xyz[i] + (off + side * 0.12) * left[i]
             mb.add(*g.box((0.12, 0.1, 0.9), q + 0.45 * UP, road.heading[i]), rail)
 
@@ -130,8 +133,11 @@ def build(p: Params) -> Scene:
     )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
+    w = p.lane_width_m  # the lanes of both carriageways, as offsets from the ego's
+    lanes = tuple(Lane((j - p.lane) * w, 1) for j in range(1, p.lanes + 1)) + tuple(
+        Lane(half_med + (p.lanes - j + 0.5) * w - lane_l, -1) for j in range(1, p.lanes + 1))
     return Scene(
-        "highway", v, f, ids, labels, path, traj, p.to_dict(),
+        "highway", v, f, ids, labels, path, traj, p.to_dict(), roads=RoadLayout(lanes, False), metadata=
         {
             "path_length_m": traj.length_m,
             "road_half_width_m": edge,

@@ -15,7 +15,9 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from paramspec import Param, ParamError, Params, Section, build, param, schema
+from paramspec import Param, ParamError, Params, Section, build, param, schema, section
+
+from .traffic import TrafficParams
 
 # What ``salo scenes`` lists per parameter (name, type, default, unit, help, min, max, choices).
 ParamInfo = Param
@@ -44,19 +46,26 @@ class CommonParams(Params):
     suspension_heave_m: float = param(0.01, "amplitude of the body's vertical oscillation at cruise speed",
                                       min=0.0, max=0.2)
     max_triangles: int = param(1_000_000, "face budget: building a larger mesh is an error", min=1000)
+    traffic: TrafficParams = section(TrafficParams)
 
     # Parameters added after sequences were made and cached: ``to_dict`` (a scene's ``params``, a manifest's
     # ``scene_params``, a sweep's cache key) writes them only when they differ from their default, so that what
     # was made before keeps its keys (a sensor file's effects follow the same rule).
-    written_when_set: ClassVar[tuple[str, ...]] = ("accel_smoothing_s",)
+    # The traffic section is one of them: a scene without traffic keeps the keys it had before there was any.
+    written_when_set: ClassVar[tuple[str, ...]] = ("accel_smoothing_s", "traffic")
 
     def to_dict(self) -> dict:
         out = super().to_dict()
-        defaults = {f.name: f.default for f in dataclasses.fields(self)}
         for key in self.written_when_set:
-            if out[key] == defaults[key]:
+            if getattr(self, key) == _default(self, key):
                 del out[key]
         return out
+
+
+def _default(params: Params, name: str) -> Any:
+    """The declared default of ``params``'s field ``name`` (a section's: a new instance of its class)."""
+    f = {f.name: f for f in dataclasses.fields(params)}[name]
+    return f.default_factory() if f.default is dataclasses.MISSING else f.default
 
 
 def default_of(cls: type[CommonParams], name: str, default: Any) -> Any:

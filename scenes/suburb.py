@@ -36,6 +36,7 @@ from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
 from .open_field import random_loop
 from .params import CommonParams, ParamError, param
+from .traffic import two_way_road
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "winding suburban loop over rolling terrain: detached houses, gardens, trees, parked cars"
@@ -183,8 +184,10 @@ def build(p: Params) -> Scene:
     grade = _grades(path)
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
+    roads = two_way_road(p.lane_offset_m, p.road_width_m / 2, True, terrain, p.road_width_m / 2 - PARK_FROM_KERB_M,
+                         CAR_HALF_WIDTH_M, p.sidewalk_width_m, p.kerb_height_m)
     return Scene(
-        "suburb", v, f, ids, labels, path, traj, p.to_dict(),
+        "suburb", v, f, ids, labels, path, traj, p.to_dict(), roads=roads, metadata=
         {
             "path_length_m": traj.length_m,
             "loop_length_m": loop_len,

@@ -32,6 +32,7 @@ from . import geometry as g
 from . import paths, props
 from .base import MeshBuilder, Scene, check_budget
 from .params import CommonParams, ParamError, param
+from .traffic import two_way_road
 from .trajectory import PathTrajectory
 
 DESCRIPTION = "long tunnel (box or arched, straight or curved) under a hill, portals, open road both ends"
@@ -271,8 +272,9 @@ def build(p: Params, name: str = "tunnel") -> Scene:
     )
     check_budget(mb.n_faces, p.max_triangles)
     v, f, ids, labels = mb.arrays()
+    roads = two_way_road(p.lane_offset_m, p.width_m / 2 - p.walkway_width_m, False, cyclists=False)
     return Scene(
-        name, v, f, ids, labels, path, traj, p.to_dict(),
+        name, v, f, ids, labels, path, traj, p.to_dict(), roads=roads, metadata=
         {
             "portal_s": [float(s_path[i_in]), float(s_path[i_out])],
             "interior_s": [float(s_path[i_in]), float(s_path[i_out])],

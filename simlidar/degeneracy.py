@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels.information import information_sums
+
 
 def plane_jacobian(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """(6, N) the point-to-plane Jacobian ``J = [n, p x n]`` of (N, 3) points and unit normals, one row of
@@ -74,7 +76,8 @@ def degeneracy(points: np.ndarray, normals: np.ndarray) -> Degeneracy:
     n = len(points)
     if n == 0:
         return Degeneracy(np.zeros(6), np.zeros(3), np.array([1.0, 0.0, 0.0]), 0)
-    H = information_matrix(points, normals) / n
+    # compiled (``kernels.information``): the same sums as information_matrix to rounding, in one pass
+    H = information_sums(np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)) / n
     w_t, v_t = np.linalg.eigh(H[:3, :3])
     weakest = v_t[:, 0]
     weakest = weakest * np.sign(weakest[np.argmax(np.abs(weakest))])

@@ -80,6 +80,10 @@ class InMemorySequence:
         k = k % len(self)
         return Frame(k, self.points[k].astype(np.float64), None, self.fields[k], self.path / f"{k:06d}")
 
+    def frame(self, k: int, truth: bool = True) -> Frame:
+        """Frame ``k`` (its fields are in memory: the truth costs nothing to leave in)."""
+        return self[k]
+
     def __iter__(self):
         for k in range(len(self)):
             yield self[k]

@@ -17,6 +17,8 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from .kernels.sweep import solve_hits
+
 
 @dataclass
 class RayHits:
@@ -49,6 +51,10 @@ class CompactHits:
     cos_incidence: (m,) float64 signed d . n_face (positive: the back side was hit).
     face_normals: (F, 3) the mesh's unit face normals (the raycaster's table, shared, not copied).
     ``normal`` (m, 3): the hit triangle's unit normal turned towards the ray origin, made when asked.
+    With moving objects (``simlidar.actors.merge_hits``): actor (m,) the actor hit (-1: the static
+    world; face is then -1 on an actor's row); actor_normal (k, 3) its outward normal in the world and
+    actor_velocity (k, 3) the velocity of the point hit, m/s, one row per actor row (``actor >= 0``), in
+    order; None without.
     """
 
     ray: np.ndarray
@@ -56,16 +62,32 @@ class CompactHits:
     distance: np.ndarray
     cos_incidence: np.ndarray
     face_normals: np.ndarray
+    actor: np.ndarray | None = None
+    actor_normal: np.ndarray | None = None
+    actor_velocity: np.ndarray | None = None
 
     @property
     def normal(self) -> np.ndarray:
         n = np.take(self.face_normals, self.face, axis=0)
+        if self.actor is not None:
+            n[self.actor >= 0] = self.actor_normal
         n *= -np.sign(self.cos_incidence)[:, None]  # face the ray origin
         return n
 
     def select(self, mask: np.ndarray) -> CompactHits:
+        """The rows ``mask`` (a boolean mask or ascending indices) picks."""
+        if self.actor is None:
+            return CompactHits(self.ray[mask], self.face[mask], self.distance[mask], self.cos_incidence[mask],
+                               self.face_normals)
+        slot = self.actor_slots()[mask]
+        slot = slot[slot >= 0]
         return CompactHits(self.ray[mask], self.face[mask], self.distance[mask], self.cos_incidence[mask],
-                           self.face_normals)
+                           self.face_normals, self.actor[mask], self.actor_normal[slot], self.actor_velocity[slot])
+
+    def actor_slots(self) -> np.ndarray:
+        """(m,) each row's place in ``actor_normal`` and ``actor_velocity`` (-1 on the static world's rows)."""
+        on = self.actor >= 0
+        return np.where(on, np.cumsum(on) - 1, -1)
 
 
 class Raycaster:
@@ -106,13 +128,14 @@ class Raycaster:
         """The bare Embree call, threaded: float32 local-frame rays -> (primID, tfar).
 
         origins32, directions32: (n, 3) float32, already shifted by ``self.offset``.
-        max_distance: (n,) float32.
+        max_distance: (n,) float32 (left as it is).
         """
         bounds = np.linspace(0, len(origins32), self.threads + 1).astype(int)
 
         def run(k: int):
             a, b = bounds[k], bounds[k + 1]
-            return self._scene.run(origins32[a:b], directions32[a:b], dists=max_distance[a:b], output=1)
+            # (a copy: embreex writes each hit's distance back into the array it is given)
+            return self._scene.run(origins32[a:b], directions32[a:b], dists=max_distance[a:b].copy(), output=1)
 
         parts = self.map(run, list(range(self.threads)))
         return (
@@ -121,27 +144,24 @@ class Raycaster:
         )
 
     def cast_compact(
-        self, origins_local: np.ndarray, directions: np.ndarray, max_distance: float
+        self, origins_local: np.ndarray, directions: np.ndarray, max_distance: float,
+        origins32: np.ndarray | None = None, directions32: np.ndarray | None = None,
     ) -> CompactHits:
         """Cast rays in the BVH's local frame (world minus ``self.offset``), one thread.
 
-        origins_local: (n, 3) float64; directions: (n, 3) float64 unit vectors.
+        origins_local: (n, 3) float64; directions: (n, 3) float64 unit vectors; origins32,
+        directions32: their contiguous float32 copies, if the caller has them.
         Embree picks the triangle; the distance is then solved in float64 against
         the triangle's plane, so it is exact to float64 for the given ray.
         """
         n = len(directions)
-        o32 = np.ascontiguousarray(origins_local, dtype=np.float32)
-        d32 = np.ascontiguousarray(directions, dtype=np.float32)
+        o32 = np.ascontiguousarray(origins_local, dtype=np.float32) if origins32 is None else origins32
+        d32 = np.ascontiguousarray(directions, dtype=np.float32) if directions32 is None else directions32
         # Embree's distance is float32: leave a margin and cut exactly in float64 below.
         limit32 = np.full(n, max_distance * (1 + 1e-5) + 1e-3, dtype=np.float32)
         prim = self._scene.run(o32, d32, dists=limit32)  # the triangle ids alone: the range is solved below
-        ray = np.flatnonzero(prim >= 0)
-        face = prim[ray].astype(np.int64)
-        n_f = np.take(self._face_normal, face, axis=0)  # np.take: row gathers several times faster than [face]
-        denom = np.einsum("ij,ij->i", np.take(directions, ray, axis=0), n_f)
-        num = np.take(self._face_offset, face) - np.einsum("ij,ij->i", np.take(origins_local, ray, axis=0), n_f)
-        grazing = np.abs(denom) < 1e-9
-        t = num / np.where(grazing, 1.0, denom)
+        ray, face, t, denom, grazing = solve_hits(prim, origins_local, directions, self._face_normal,
+                                                  self._face_offset)
         if grazing.any():  # a ray in the triangle's plane: Embree's own distance (asked again for these rays)
             g = ray[grazing]
             t[grazing] = self._scene.run(o32[g], d32[g], dists=limit32[g], output=1)["tfar"]

@@ -71,7 +71,7 @@ def simulate_sequence(
     t0 = frame_start_times(sensor, frames, t_start)
     poses = trajectory.pose_at(t0)
     imu = sequence_imu(trajectory, sensor, frames, seed, float(t0[0]))  # before anything is written: may refuse
-    writer = SequenceWriter(out_dir, sensor, {}, force=force, n_objects=len(world.object_labels),
+    writer = SequenceWriter(out_dir, sensor, {}, force=force, n_objects=world.object_count,
                             compress_truth=compress_truth, imu=imu)  # refuses an existing folder now
     strict = world.normals_reliable if strict_inside is None else bool(strict_inside)
     inside_record = check_poses(sim.raycaster, poses, strict, source=world.source)
@@ -81,10 +81,12 @@ def simulate_sequence(
         "reference_time": "sweep start",
         "world_source": world.source,
         "world_faces": int(len(world.faces)),
-        "object_labels": list(world.object_labels),
+        "object_labels": world.all_object_labels,
         "inside_check": inside_record,
         **(info or {}),
     }
+    if sim.actors is not None:  # the moving objects: their ids, classes, boxes (their boxes per frame: tracks.csv)
+        manifest_info["actors"] = sim.actors.describe()
     writer.info = manifest_info
     with writer:
         for k in range(frames):

@@ -49,13 +49,17 @@ if any (true range, point, normal, object); without one, NaN and object -1.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import se3
-from .formats.truth import SIDECAR_DTYPE, sidecar_dtype
+from .actors import ActorSet, merge_hits
+from .formats.tracks import TRACK_DTYPE
+from .formats.truth import MOVING_SPEED_M_S, SIDECAR_DTYPE, sidecar_dtype
 from .inside import InsideProbe, SensorInsideGeometry, probe
+from .kernels.sweep import block_rays, fill_rows, measure_block
 from .raycast import CompactHits, Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
@@ -86,6 +90,12 @@ class Scan:
     weather: (N,) uint8 what each return is (``simlidar.weather.KINDS``: 0 a surface, 1 fog, 2 rain,
         3 snow), or None when the sensor has no weather. A weather return's true range, point, normal
         and object are those of the surface its beam reached (NaN and -1 when it reached none).
+    object_class, moving, velocity, tracks: with moving objects in the world (``simlidar.actors``),
+        else None: (N,) uint8 the class of the object hit (``simlidar.formats.truth.ACTOR_CLASSES``: 0
+        the static world); (N,) bool it moved at the return's instant; (N, 3) the velocity of the
+        point hit in the world, along the reference frame's axes, m/s (0 on the static world);
+        ``tracks``: (n,) ``simlidar.formats.tracks.TRACK_DTYPE``, every moving object within range
+        at the sweep's start, its box in the reference frame.
     """
 
     xyz: np.ndarray
@@ -100,6 +110,10 @@ class Scan:
     object_id: np.ndarray
     motion: np.ndarray | None = None
     weather: np.ndarray | None = None
+    object_class: np.ndarray | None = None
+    moving: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    tracks: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.xyz)
@@ -111,8 +125,9 @@ class Scan:
 
     def sidecar(self) -> np.ndarray:
         """The per-point fields KITTI's .bin lacks, as a structured array (SIDECAR_DTYPE, format version 1; with
-        the ``weather`` field when the scan has one, ``sidecar_dtype(weather=True)``)."""
-        rec = np.zeros(len(self), dtype=sidecar_dtype(self.weather is not None))
+        the ``weather`` field when the scan has one, and the moving objects' fields when the world has them:
+        ``sidecar_dtype(weather, actors)``)."""
+        rec = np.zeros(len(self), dtype=sidecar_dtype(self.weather is not None, self.object_class is not None))
         rec["ring"] = self.ring
         rec["azimuth_index"] = self.azimuth_index
         rec["time_s"] = self.time_s
@@ -123,6 +138,8 @@ class Scan:
         rec["object_id"] = self.object_id
         if self.weather is not None:
             rec["weather"] = self.weather
+        if self.object_class is not None:
+            rec["object_class"], rec["moving"], rec["velocity"] = self.object_class, self.moving, self.velocity
         return rec
 
 
@@ -154,17 +171,52 @@ class CastBlock:
     gain: np.ndarray | None = None
 
 
-def _rows_times(x: np.ndarray, M: np.ndarray, out: np.ndarray) -> None:
-    """out = x @ M for (m, 3) rows x and a (3, 3) M, into the C-contiguous (m, 3) ``out``.
+# A scan's per-return arrays: {field: (dtype, columns)}; with moving objects, their truth's too.
+SCAN_FIELDS = {"xyz": (np.float64, 3), "intensity": (np.float32, 1), "ring": (np.int64, 1),
+               "azimuth_index": (np.int64, 1), "time_s": (np.float64, 1), "range_m": (np.float64, 1),
+               "true_range_m": (np.float64, 1), "true_xyz": (np.float64, 3), "normal": (np.float64, 3),
+               "object_id": (np.int32, 1)}
+ACTOR_FIELDS = {"object_class": (np.uint8, 1), "moving": (np.bool_, 1), "velocity": (np.float64, 3)}
 
-    As a batch of 32-row products (numpy's own small-matrix loop: 3 times faster here than einsum,
-    and than BLAS, whose threads wait for cores on a busy machine), the remainder by einsum.
+
+class ScanMemory:
+    """The per-return arrays of a simulator's scans, reused once a scan is let go.
+
+    Writing fresh memory costs a page fault per 4 kB page, and a sweep's arrays are some 17 MB
+    (on the development machine, a virtual machine that hands free memory back to its host,
+    the faults were a fifth of a sweep's CPU time whenever the allocator did not happen to reuse
+    the last scan's memory). Each scan's arrays are views of a set allocated for a whole sweep's
+    rays; a set none of whose arrays is referenced any more (the writer has written its frame,
+    the caller dropped it) is handed to the next sweep. A set still referenced is never reused.
     """
-    m = len(x) - len(x) % 32
-    if m:
-        np.matmul(x[:m].reshape(-1, 32, 3), M, out=out[:m].reshape(-1, 32, 3))
-    if m < len(x):
-        np.einsum("ni,ij->nj", x[m:], M, out=out[m:])
+
+    def __init__(self, fields: dict, capacity: int, keep: int = 4):
+        self.fields, self.capacity, self.keep = fields, int(capacity), keep
+        self._sets: list[dict[str, np.ndarray]] = []
+
+    def arrays(self, n: int) -> dict[str, np.ndarray]:
+        """Uninitialised arrays of ``n`` rows, one per field."""
+        for arrays in self._sets:
+            # each referenced only by this dict and getrefcount's argument: no scan holds a view of them
+            if len(arrays["xyz"]) >= n and all(sys.getrefcount(arrays[k]) <= 2 for k in arrays):
+                return {k: a[:n] for k, a in arrays.items()}
+        size = max(n, self.capacity)
+        arrays = {k: np.empty((size, cols) if cols > 1 else size, dt) for k, (dt, cols) in self.fields.items()}
+        if len(self._sets) < self.keep:
+            self._sets.append(arrays)
+        return {k: a[:n] for k, a in arrays.items()}
+
+
+# An empty draw: the kernels' placeholder where no draws are made (no dropouts, exponent 1).
+_NO_DRAWS = np.empty(0)
+_NO_INDEX = np.empty(0, np.int64)
+_NO_ROWS = np.empty((0, 3))
+
+
+def _bare(hits: CompactHits) -> np.ndarray:
+    """(m,) the rows of a block whose beam reached no surface (a weather echo): no face, no moving object."""
+    bare = hits.face < 0
+    return bare if hits.actor is None else bare & (hits.actor < 0)
 
 
 class SweepSimulator:
@@ -194,6 +246,9 @@ class SweepSimulator:
         self.motion_distortion = motion_distortion
         self.raycaster = raycaster or Raycaster(world.vertices, world.faces, threads=threads)
         self._reflectance = world.object_reflectance
+        self.actors = ActorSet(world.actors, len(world.object_labels), sensor.max_range_m) if world.actors else None
+        if self.actors is not None:  # the actors' object ids follow the static world's
+            self._reflectance = np.concatenate([self._reflectance, self.actors.reflectance])
         cols, rings = sensor.columns_per_sweep, sensor.rings
         # Ray tables in firing order: column-major, rings ascending within a column.
         self.ray_column = np.repeat(np.arange(cols), rings)
@@ -208,6 +263,12 @@ class SweepSimulator:
         bias_rng = np.random.default_rng([self.seed, 0xB1A5])
         self.ring_bias_m = bias_rng.normal(0.0, 1.0, rings) * sensor.ring_bias_std_m
         self._weather = WeatherModel(sensor) if sensor.receiver.enabled else None
+        fields = dict(SCAN_FIELDS)
+        if sensor.weather.on:
+            fields["weather"] = (np.uint8, 1)
+        if self.actors is not None:
+            fields.update(ACTOR_FIELDS)
+        self._memory = ScanMemory(fields, sensor.rays_per_sweep)
 
     @staticmethod
     def _directions(elevation: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
@@ -252,26 +313,31 @@ class SweepSimulator:
         else:
             T_ref = trajectory.pose_at(np.array([t0]))[0]
             T_fire = None
+        acts = None
+        if self.actors is not None:
+            acts = self.actors.for_sweep(self, t0, T_ref, T_cols if self.motion_distortion else None)
         cols = np.linspace(0, s.columns_per_sweep, N_BLOCKS + 1).astype(int)
         blocks = [(k, cols[k] * s.rings, cols[k + 1] * s.rings) for k in range(N_BLOCKS)]
-        cast = self.raycaster.map(lambda blk: self._cast_block(*blk, T_ref, T_fire, frame_index), blocks)
+        if acts is not None:
+            acts.split(cols * s.rings)
+        cast = self.raycaster.map(lambda blk: self._cast_block(*blk, T_ref, T_fire, frame_index, t0, acts), blocks)
         # Fill preallocated outputs block by block (no concatenation pass).
         sizes = [len(c.measured) for c in cast]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
         n = int(offsets[-1])
-        out = Scan(
-            xyz=np.empty((n, 3)), intensity=np.empty(n, np.float32), ring=np.empty(n, np.int64),
-            azimuth_index=np.empty(n, np.int64), time_s=np.empty(n), range_m=np.empty(n),
-            true_range_m=np.empty(n), true_xyz=np.empty((n, 3)), normal=np.empty((n, 3)),
-            object_id=np.empty(n, np.int32), motion=motion,
-            weather=np.empty(n, np.uint8) if s.weather.on else None,
-        )
+        out = Scan(**self._memory.arrays(n), motion=motion)
+        if self.actors is not None:
+            out.object_class[:], out.moving[:], out.velocity[:] = 0, False, 0.0
         jobs = list(zip(cast, offsets[:-1], strict=True))
         self.raycaster.map(lambda job: self._fill_block(job[0], out, job[1], T_ref), jobs)
+        if self.actors is not None:
+            out.tracks = acts.tracks(out.object_id) if acts is not None else np.zeros(0, TRACK_DTYPE)
         return out
 
-    def _cast_block(self, k, a, b, T_ref, T_fire, frame_index) -> CastBlock:
-        """Cast rays a:b of the sweep (block ``k``) and draw their noise; returns the block's returns."""
+    def _cast_block(self, k, a, b, T_ref, T_fire, frame_index, t0: float = 0.0, acts=None) -> CastBlock:
+        """Cast rays a:b of the sweep (block ``k``) and draw their noise; returns the block's returns.
+
+        acts: the moving objects near the sensor in this sweep (``simlidar.actors.SweepActors``), or None."""
         s, rc = self.sensor, self.raycaster
         rng = np.random.default_rng([self.seed, 1, int(frame_index), k])
         dir_local = self._dir_local[a:b]
@@ -283,49 +349,53 @@ class SweepSimulator:
                 s.column_azimuth_rad(col) + s.ring_azimuth_offset_rad[ring] + rng.normal(0, jit, b - a),
             )
         # Rays are cast in the BVH's frame, the world shifted by -rc.offset (the mesh centred for Embree's float32).
-        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset
         if T_fire is None:
-            d_bvh = np.einsum("nj,ij->ni", dir_local, R_ref)
-            o_bvh = np.broadcast_to(t_ref, (b - a, 3))
-        elif s.laser_interval_s == 0:
-            # One pose per column: rotate each column's beams with one batched matmul.
+            R, t, pose_of_ray = T_ref[None, :3, :3], T_ref[None, :3, 3], np.zeros(b - a, np.int64)
+        elif s.laser_interval_s == 0:  # one pose per column
             c0, c1 = a // s.rings, b // s.rings
-            R = T_fire[c0:c1, :3, :3]
-            d_bvh = np.matmul(dir_local.reshape(c1 - c0, s.rings, 3), R.transpose(0, 2, 1)).reshape(-1, 3)
-            o_bvh = np.repeat(T_fire[c0:c1, :3, 3] - rc.offset, s.rings, axis=0)
+            R, t, pose_of_ray = T_fire[c0:c1, :3, :3], T_fire[c0:c1, :3, 3], _NO_INDEX
         else:
-            ti = self._ray_time_idx[a:b]
-            d_bvh = np.einsum("nij,nj->ni", T_fire[ti, :3, :3], dir_local)
-            o_bvh = T_fire[ti, :3, 3] - rc.offset
-        hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0)
+            R, t, pose_of_ray = T_fire[:, :3, :3], T_fire[:, :3, 3], self._ray_time_idx[a:b]
+        o_bvh, d_bvh, o32, d32 = block_rays(dir_local, R, t, pose_of_ray, s.rings, rc.offset)
+        hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0, o32, d32)
+        if acts is not None:  # the nearest of the static hit and the moving objects' at each ray's instant
+            rows, which = acts.block_rows(a)
+            found = acts.cast(rows, which, o_bvh, rc.offset, d_bvh, t0 + self.ray_time_s[a + rows], s.max_range_m + 1.0)
+            hits = merge_hits(hits, found)
         if self._weather is not None:
-            return self._cast_weather(k, a, b, hits, rng, frame_index, dir_local, o_bvh, d_bvh)
+            return self._cast_weather(k, a, b, hits, rng, frame_index, dir_local, o_bvh, d_bvh, t0, acts)
 
-        ring = self.ray_ring[a + hits.ray]
-        sigma = s.range_noise_std_m
-        if s.incidence_noise_max_factor > 1:  # sigma0 / cos(incidence), clipped
-            cos = np.abs(hits.cos_incidence)
-            sigma = sigma * np.minimum(1.0 / np.maximum(cos, 1e-12), s.incidence_noise_max_factor)
-        noise = rng.standard_normal(len(ring)) * sigma
-        echo = hits.distance if s.beam_divergence_deg == 0 else self._echo_range(hits, o_bvh, d_bvh)
-        measured = echo + self.ring_bias_m[ring] + noise
-        keep = (measured >= s.min_range_m) & (measured <= s.max_range_m)
-        if s.dropout_probability > 0:
-            keep &= rng.random(len(ring)) >= s.dropout_probability
-        if not keep.all():
+        m = len(hits.ray)
+        z = rng.standard_normal(m)  # the noise's draws, then the dropouts': the order the seeds were drawn in
+        u = rng.random(m) if s.dropout_probability > 0 else _NO_DRAWS
+        echo = hits.distance if s.beam_divergence_deg == 0 else self._echo_range(hits, o_bvh, d_bvh, a, t0, acts)
+        # sigma0 / cos(incidence) clipped, measured = echo + bias + noise, the range window, the dropouts
+        ring, measured, keep = measure_block(hits.ray, echo, hits.cos_incidence, self.ray_ring[a:b], self.ring_bias_m,
+                                             z, s.range_noise_std_m, s.incidence_noise_max_factor, s.min_range_m,
+                                             s.max_range_m, u, s.dropout_probability)
+        if len(keep) < m:
             hits, ring, measured = hits.select(keep), ring[keep], measured[keep]
         return CastBlock(a, hits, ring, measured, dir_local, o_bvh, d_bvh)
 
-    def _cast_weather(self, k, a, b, hits: CompactHits, rng, frame_index, dir_local, o_bvh, d_bvh) -> CastBlock:
+    def _hit_objects(self, hits: CompactHits) -> np.ndarray:
+        """(m,) the object id of each hit (an actor's after the static world's)."""
+        obj = np.take(self.world.face_object_id, hits.face)
+        if hits.actor is not None:
+            on = hits.actor >= 0
+            obj[on] = self.actors.first_object_id + hits.actor[on]
+        return obj
+
+    def _cast_weather(self, k, a, b, hits: CompactHits, rng, frame_index, dir_local, o_bvh, d_bvh, t0=0.0,
+                      acts=None) -> CastBlock:
         """``_cast_block``'s end with the receiver on: each beam's echo through ``WeatherModel.select``, then
         the range noise (the surface's incidence-grown sigma on a surface's echo, sigma itself on a weather
         echo), the range window and the dropouts."""
         s = self.sensor
-        echo = hits.distance if s.beam_divergence_deg == 0 else self._echo_range(hits, o_bvh, d_bvh)
+        echo = hits.distance if s.beam_divergence_deg == 0 else self._echo_range(hits, o_bvh, d_bvh, a, t0, acts)
         cosk = np.abs(hits.cos_incidence)
         if s.intensity_incidence_exponent != 1:
             cosk = cosk**s.intensity_incidence_exponent
-        refl = np.take(self._reflectance, np.take(self.world.face_object_id, hits.face))
+        refl = np.take(self._reflectance, self._hit_objects(hits))
         power = refl * cosk / np.maximum(hits.distance, 1e-6) ** 2
         weather_rng = np.random.default_rng([self.seed, 2, int(frame_index), k])
         got = self._weather.select(weather_rng, b - a, hits.ray, hits.distance, echo, power)
@@ -336,6 +406,12 @@ class SweepSimulator:
         face[surface], distance[surface], cos_incidence[surface] = hits.face[hit], hits.distance[hit], \
             hits.cos_incidence[hit]
         rows = CompactHits(got.ray, face, distance, cos_incidence, hits.face_normals)
+        if hits.actor is not None:  # a beam's surface may be a moving object
+            rows.actor = np.full(len(got.ray), -1, np.int64)
+            rows.actor[surface] = hits.actor[hit]
+            slot = hits.actor_slots()[hit]
+            slot = slot[slot >= 0]  # (the rows keep the hits' order)
+            rows.actor_normal, rows.actor_velocity = hits.actor_normal[slot], hits.actor_velocity[slot]
         ring = self.ray_ring[a + got.ray]
         sigma = np.full(len(ring), s.range_noise_std_m)
         on_surface = got.kind == SURFACE
@@ -349,7 +425,8 @@ class SweepSimulator:
         return CastBlock(a, rows.select(keep), ring[keep], measured[keep], dir_local, o_bvh, d_bvh,
                          got.kind[keep], got.power[keep], got.gain[keep])
 
-    def _echo_range(self, hits: CompactHits, o_bvh: np.ndarray, d_bvh: np.ndarray) -> np.ndarray:
+    def _echo_range(self, hits: CompactHits, o_bvh: np.ndarray, d_bvh: np.ndarray, a: int = 0, t0: float = 0.0,
+                    acts=None) -> np.ndarray:
         """(m,) range a divergent beam reports for each axis hit: an echo of its sub-rays (see the module doc).
 
         The beam's ``beam_subrays`` sub-rays (``LidarModel.beam_pattern_rad``, oriented across and up the
@@ -377,13 +454,19 @@ class SweepSimulator:
             np.maximum(r, 1e-300)
         dirs = (axis[:, None, :] * c[None, :, None] + across[:, None, :] * k_across[None, :, None]
                 + up[:, None, :] * k_up[None, :, None]).reshape(-1, 3)
-        sub = rc.cast_compact(np.repeat(origin, S, axis=0), dirs, s.max_range_m + 1.0)
+        sub_origin = np.repeat(origin, S, axis=0)
+        sub = rc.cast_compact(sub_origin, dirs, s.max_range_m + 1.0)
+        if acts is not None:  # the sub-rays meet the moving objects too, at their beam's instant
+            parent = np.repeat(a + hits.ray, S)
+            rows, which = acts.rows_of_rays(parent)
+            found = acts.cast(rows, which, sub_origin, rc.offset, dirs, t0 + self.ray_time_s[parent[rows]],
+                              s.max_range_m + 1.0)
+            sub = merge_hits(sub, found)
         dist = np.full(m * S, np.inf)
         power = np.zeros(m * S)
         dist[sub.ray] = sub.distance
         cosk = np.abs(sub.cos_incidence) ** s.intensity_incidence_exponent
-        power[sub.ray] = self._reflectance[self.world.face_object_id[sub.face]] * cosk / np.maximum(
-            sub.distance, 1e-6) ** 2
+        power[sub.ray] = self._reflectance[self._hit_objects(sub)] * cosk / np.maximum(sub.distance, 1e-6) ** 2
         dist, power = dist.reshape(m, S), power.reshape(m, S)
         order = np.argsort(dist, axis=1, kind="stable")
         dist = np.take_along_axis(dist, order, axis=1)
@@ -408,43 +491,36 @@ class SweepSimulator:
         return np.where(has[rows, pick], rng_e, hits.distance)
 
     def _fill_block(self, c: CastBlock, out: Scan, off: int, T_ref: np.ndarray) -> None:
-        """Write one block's returns into rows off:off+m of the preallocated scan.
-
-        Gathers go through ``np.take`` and the (m, 3) x (3, 3) products through ``_rows_times``:
-        numpy's fancy indexing of rows, and BLAS (``matmul``, ``dot``) on such thin arrays, were 3 and 5
-        times slower here.
-        """
+        """Write one block's returns into rows off:off+m of the preallocated scan (``kernels.sweep.fill_rows``:
+        the measured and true points, normals, intensities, rings, azimuths, times, ranges, objects)."""
         s, rc = self.sensor, self.raycaster
-        hits, measured, ray = c.hits, c.measured, c.hits.ray
-        sl = slice(off, off + len(ray))
-        R_ref, t_ref = T_ref[:3, :3], T_ref[:3, 3] - rc.offset
-        g = c.first_ray + ray
-        np.multiply(measured[:, None], np.take(c.dir_local, ray, axis=0), out=out.xyz[sl])  # as the sensor reports
-        hit_bvh = np.take(c.direction_bvh, ray, axis=0)
-        hit_bvh *= hits.distance[:, None]
-        hit_bvh += np.take(c.origin_bvh, ray, axis=0)
-        hit_bvh -= t_ref
-        _rows_times(hit_bvh, R_ref, out.true_xyz[sl])  # BVH frame -> reference frame
-        _rows_times(np.take(hits.face_normals, hits.face, axis=0), R_ref, out.normal[sl])
-        out.normal[sl] *= -np.sign(hits.cos_incidence)[:, None]  # face the sensor
-        obj = np.take(self.world.face_object_id, hits.face)
-        falloff = np.minimum(1.0, (s.intensity_range_ref_m / np.maximum(measured, 1e-6)) ** 2)
-        cosk = np.abs(hits.cos_incidence)
+        hits = c.hits
+        sl = slice(off, off + len(hits.ray))
+        cosk_pow = _NO_DRAWS
         if s.intensity_incidence_exponent != 1:
-            cosk **= s.intensity_incidence_exponent
-        out.intensity[sl] = np.take(self._reflectance, obj) * cosk * falloff
+            cosk_pow = np.abs(hits.cos_incidence) ** s.intensity_incidence_exponent
+        R_ref = np.ascontiguousarray(T_ref[:3, :3])
+        moving = hits.actor is not None
+        fill_rows(off, c.first_ray, hits.ray, hits.face, hits.distance, hits.cos_incidence, c.measured, c.ring,
+                  c.dir_local, c.origin_bvh, c.direction_bvh, np.ascontiguousarray(T_ref[:3, 3] - rc.offset),
+                  R_ref, hits.face_normals, self.world.face_object_id, self._reflectance, cosk_pow,
+                  s.intensity_range_ref_m, self.ray_column, self.ray_time_s,
+                  hits.actor if moving else _NO_INDEX, hits.actor_normal if moving else _NO_ROWS,
+                  self.actors.first_object_id if self.actors is not None else 0,
+                  out.xyz, out.intensity, out.ring, out.azimuth_index, out.time_s, out.range_m, out.true_range_m,
+                  out.true_xyz, out.normal, out.object_id)
+        if moving:  # the moving objects' truth: class, motion, velocity along the reference frame's axes
+            on = np.flatnonzero(hits.actor >= 0)
+            rows = off + on
+            out.object_class[rows] = self.actors.class_code[hits.actor[on]]
+            velocity = hits.actor_velocity @ R_ref
+            out.velocity[rows] = velocity
+            out.moving[rows] = np.linalg.norm(velocity, axis=1) > MOVING_SPEED_M_S
         if c.kind is not None:
-            self._fill_weather(c, out, sl, obj)
-        out.ring[sl] = c.ring
-        np.take(self.ray_column, g, out=out.azimuth_index[sl])
-        np.take(self.ray_time_s, g, out=out.time_s[sl])
-        out.range_m[sl] = measured
-        out.true_range_m[sl] = hits.distance
-        out.object_id[sl] = obj
-        if c.kind is not None:
-            out.object_id[sl][hits.face < 0] = -1
+            self._fill_weather(c, out, sl)
+            out.object_id[sl][_bare(hits)] = -1
 
-    def _fill_weather(self, c: CastBlock, out: Scan, sl: slice, obj: np.ndarray) -> None:
+    def _fill_weather(self, c: CastBlock, out: Scan, sl: slice) -> None:
         """The receiver's part of a block's rows: intensities (a surface's times its gain, a weather echo's from
         its power), the weather flags, and the truth of beams that reached no surface (NaN)."""
         s = self.sensor
@@ -454,7 +530,6 @@ class SweepSimulator:
         if weather.any():
             r = np.maximum(c.measured[weather], 1e-6)
             intensity[weather] = np.minimum(1.0, c.power[weather] * np.minimum(r, s.intensity_range_ref_m) ** 2)
-            bare = c.hits.face < 0
-            out.normal[sl][bare] = np.nan
+            out.normal[sl][_bare(c.hits)] = np.nan
         if out.weather is not None:
             out.weather[sl] = c.kind

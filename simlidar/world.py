@@ -32,6 +32,7 @@ LABEL_REFLECTANCE = {
     "rail": 0.6,
     "light": 0.7,
     "object": 0.4,
+    "person": 0.35,  # clothing, 0.1 to 0.6 at 905 nm
 }
 DEFAULT_REFLECTANCE = 0.4
 
@@ -53,6 +54,8 @@ class World:
         or inconsistent ones.
     reflectance: (n_objects,) diffuse reflectance per object in [0, 1], or None: from each
         object's label (``LABEL_REFLECTANCE``). ``with_reflectance`` sets it by label or object id.
+    actors: moving objects (``simlidar.actors``: cars, lorries, cyclists, pedestrians on trajectories of
+        their own); their object ids follow the static world's (``object_count``, ``all_object_labels``).
     """
 
     vertices: np.ndarray
@@ -62,6 +65,7 @@ class World:
     source: str = ""
     normals_reliable: bool = True
     reflectance: np.ndarray | None = None
+    actors: list = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, dtype=np.float64)
@@ -82,6 +86,22 @@ class World:
                                  f"({len(self.object_labels)}), got shape {self.reflectance.shape}")
             if not np.all((self.reflectance >= 0) & (self.reflectance <= 1)):
                 raise WorldError(f"{self.source or 'world'}: reflectance must lie in [0, 1]")
+
+    @property
+    def object_count(self) -> int:
+        """Objects that returns may hit: the static world's, then the actors'."""
+        return len(self.object_labels) + len(self.actors)
+
+    @property
+    def all_object_labels(self) -> list[str]:
+        """The label of every object id: the static world's, then each actor's."""
+        return list(self.object_labels) + [a.label for a in self.actors]
+
+    def without_actors(self) -> World:
+        """The same world with nothing moving (its static twin)."""
+        import dataclasses
+
+        return dataclasses.replace(self, actors=[])
 
     @property
     def object_reflectance(self) -> np.ndarray:

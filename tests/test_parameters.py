@@ -32,10 +32,13 @@ def test_scene_parameters_are_declared_with_help_and_units():
     for name in scenes.SCENES:
         sec = scenes.scene_schema(name)
         assert sec.name == name and sec.help == scenes.SCENES[name].DESCRIPTION
-        for p in sec.members:
-            assert p.help and not p.help.endswith((", m", ", m/s", ", deg", "percent")), (name, p.name)
-            assert p.unit == unit_of(p.name), (name, p.name)
-            assert p.type in ("bool", "int", "float", "str") and not p.nullable
+        for key, p in sec.walk():  # a section's keys too (traffic)
+            if isinstance(p, Section):
+                assert p.help, (name, key)
+                continue
+            assert p.help and not p.help.endswith((", m", ", m/s", ", deg", "percent")), (name, key)
+            assert p.unit == unit_of(p.name), (name, key)
+            assert p.type in ("bool", "int", "float", "str", "list[str]") and not p.nullable, (name, key)
 
 
 def test_salo_scenes_lists_the_declarations(capsys):
@@ -163,7 +166,8 @@ def test_the_parameters_page_is_what_the_declarations_make():
     sensor = [name for name, m in SENSOR_FILE.walk() if not isinstance(m, Section)]
     assert "weather.fog.mor_m" in sensor and "receiver.detection_range_m" in sensor
     assert "imu.gyroscope_noise_density" in sensor
-    for key in (*sensor, *schema(SweepSpec).names, *schema(CommonParams).names, *odometry):
+    common = [name for name, m in schema(CommonParams).walk() if not isinstance(m, Section)]  # traffic.* too
+    for key in (*sensor, *schema(SweepSpec).names, *common, *odometry):
         assert f"| `{key}` |" in page, key
 
 

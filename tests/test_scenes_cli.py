@@ -155,9 +155,9 @@ def drawn(monkeypatch):
     calls = []
 
     def record(vertices, faces, face_labels, path, out_png, T_world_lidar=None, scan_xyz_world=None,
-               scan_ring=None, title="", size=(1800, 900)):
+               scan_ring=None, title="", size=(1800, 900), moving=None, boxes=None, actors=None):
         calls.append({"vertices": vertices, "faces": faces, "path": path, "T": T_world_lidar,
-                      "xyz": scan_xyz_world, "title": title})
+                      "xyz": scan_xyz_world, "title": title, "moving": moving, "boxes": boxes})
 
     monkeypatch.setattr("tools.view.render_scene", record)
     return calls

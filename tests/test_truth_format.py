@@ -160,8 +160,8 @@ def test_a_damaged_or_unknown_truth_file_is_a_one_line_error(tmp_path):
     car.write_bytes(b"NOTTRUTH" + data[8:])
     with pytest.raises(DatasetError, match=r"000000\.truth: not a truth file"):
         open_sequence(seq.path)[0]
-    car.write_bytes(data[:18] + bytes([0x02]) + data[19:])  # an optional block this version does not know
-    with pytest.raises(DatasetError, match=r"000000\.truth: optional truth blocks 0x02 this version does not read"):
+    car.write_bytes(data[:18] + bytes([0x04]) + data[19:])  # an optional block this version does not know
+    with pytest.raises(DatasetError, match=r"000000\.truth: optional truth blocks 0x04 this version does not read"):
         open_sequence(seq.path)[0]
     manifest = json.loads((seq.path / "manifest.json").read_text())
     manifest["format_version"] = 4
@@ -182,3 +182,27 @@ def test_a_failing_writer_leaves_nothing(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="No space left"):
         simulate_sequence(world, traj, sensor, tmp_path / "seq", frames=3)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_method_reads_the_firing_fields_without_decoding_the_truth(tmp_path):
+    """``method_frame``: what a method is handed (the odometry, the peers, the staging) is the firing fields
+    only, the same values as the whole record's; the truth is not decoded (and not handed over)."""
+    from odometry.config import variant
+    from odometry.pipeline import run_sequence
+    from simlidar.sequence import method_frame
+
+    seq, _ = _simulate(tmp_path, load_sensor("vlp16"), frames=3)
+    for k in range(len(seq)):
+        whole, firing = seq[k], method_frame(seq, k)
+        assert firing.fields.dtype == truth.FIRING_DTYPE
+        assert set(firing.fields.dtype.names).isdisjoint({"true_xyz", "true_range_m", "normal", "object_id"})
+        for name in firing.fields.dtype.names:
+            assert np.array_equal(firing.fields[name], whole.fields[name]), name
+        assert np.array_equal(firing.points, whole.points) and np.array_equal(firing.intensity, whole.intensity)
+    frames = [seq[0]]
+    assert method_frame(frames, 0) is frames[0]  # a plain list of frames: indexed as it is
+    # the odometry's poses are those it gives when it reads the whole record (the same inputs)
+    firing_run = run_sequence(seq, variant("salo"), seq.sensor)
+    seq.frame = lambda k, truth=True: type(seq).frame(seq, k)  # (every read decodes the truth)
+    whole_run = run_sequence(seq, variant("salo"), seq.sensor)
+    assert np.isfinite(firing_run.poses).all() and np.array_equal(firing_run.poses, whole_run.poses)

@@ -9,6 +9,7 @@
     python -m tools.bench_sim --big-world 2000000 --e2e-frames 0   # a tiled city of >= 2M triangles:
                                               # load time, sweeps/s, memory over a 300-frame sequence
     python -m tools.bench_sim --weather-repeats 0  # skip the weather's cost (simlidar.weather)
+    python -m tools.bench_sim --actors-repeats 0   # skip the moving actors' cost (simlidar.actors)
 
 The end-to-end run calls ``tools.runners.simulate_scene``, the function behind
 ``salo simulate --scene``, writing the sequence (scans and truth) to a temporary
@@ -21,6 +22,9 @@ sensor and path, interleaved so that other jobs on the machine weigh on each ali
 with the sensor as it is, with the receiver's power model on in clear air, and in
 dense fog, rain and snow, each against the sensor as it is.
 
+The moving actors' cost: CPU time per sweep with 20 and with 100 actors near the sensor
+(the city's traffic at high densities, the nearest ones), interleaved with the static world's.
+
 Prints figures; it asserts nothing (speed is measured here, never in tests).
 """
 
@@ -28,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import resource
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -109,7 +114,7 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
     dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
     t = time.perf_counter()
     for _ in range(repeats):
-        rc._scene.run(o32, d32, dists=dist, output=1)
+        rc._scene.run(o32, d32, dists=dist.copy(), output=1)  # (embreex writes the hits back into dists)
     t_bare1 = (time.perf_counter() - t) / repeats
     t = time.perf_counter()
     for _ in range(repeats):
@@ -128,14 +133,21 @@ def bench_sweep(world: World, sensor_name: str, repeats: int) -> None:
 
 
 def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, tmp_root: str | None,
-                     imu: bool = False) -> None:
-    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast;
-    ``imu``: then again with the sensor's IMU on, against the first run."""
+                     imu: bool = False, rounds: int = 5) -> None:
+    """``salo simulate --scene NAME --seed S --frames F`` through its library function, against the bare cast.
+
+    The whole call once (BVH, inside check, sweeps, writing); then, for the CPU per sweep, ``rounds`` rounds
+    of the same sequence simulated again with the world's BVH built (``simulate_sequence``, writing
+    included), the bare cast of its rays and the floor's files and noise, one after the other in each round,
+    so that other jobs on the machine weigh on each alike. ``imu``: then again with the sensor's IMU on,
+    against the first run.
+    """
     from tools.runners import simulate_scene
     from tools.worlds import build_scene_world
 
     sensor = load_sensor(sensor_name)
     scene = build_scene_world(scene_name, seed, {})
+    warm_up(scene.world, sensor)
     marks: dict[int, float] = {}
 
     def on_frame(k, scan):
@@ -145,50 +157,47 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
         out = Path(tmp) / "seq"
         t0, c0 = time.perf_counter(), time.process_time()
         done = simulate_scene(scene, sensor, out, frames, seed=seed, on_frame=on_frame)
-        t_end, cpu_sim = time.perf_counter(), time.process_time() - c0
+        t_end, cpu_sim = time.perf_counter(), time.process_time() - c0  # the whole call, for the IMU's ratio
         sizes = {sub: sum(p.stat().st_size for p in (out / sub).iterdir()) for sub in ("velodyne", "sidecar")}
         import json
 
         returns = json.loads((out / "manifest.json").read_text())["points"]
-        cpu_floor_write = floor_write_cpu_s(Path(tmp) / "floor", frames, sizes)
-    cpu_floor_noise = floor_noise_cpu_s(returns // frames)
-    # The same rays, bare: each column from its firing pose, 2 threads, no noise, no truth, nothing written.
-    sim = SweepSimulator(scene.world, sensor, seed=seed)
-    rc = sim.raycaster
-    t_frames = np.arange(frames) * sensor.sweep_period_s
-    rays = []
-    for t in t_frames[:: max(1, frames // 10)]:
-        T = scene.trajectory.pose_at(t + sim._times_unique)
-        R = T[sim._ray_time_idx, :3, :3]
-        d = np.einsum("nij,nj->ni", R, sim._dir_local)
-        o = T[sim._ray_time_idx, :3, 3] - rc.offset
-        rays.append((np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)))
-    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
-    rc.cast_raw(*rays[0], dist)  # warm up
-    t, c = time.perf_counter(), time.process_time()
-    for _ in range(3):
-        for o32, d32 in rays:
-            rc.cast_raw(o32, d32, dist)
-    t_bare = (time.perf_counter() - t) / (3 * len(rays))
-    cpu_bare = (time.process_time() - c) / (3 * len(rays))
+        sim = SweepSimulator(scene.world, sensor, seed=seed)
+        rays = frame_rays(sim, scene.trajectory, np.arange(frames) * sensor.sweep_period_s)
+        cpu = {"simulate": 0.0, "bare cast": 0.0, "files": 0.0, "noise": 0.0}
+        for r in range(rounds):
+            c = time.process_time()
+            simulate_sequence(scene.world, scene.trajectory, sensor, Path(tmp) / f"again{r}", frames=frames, seed=seed,
+                              simulator=sim)
+            cpu["simulate"] += time.process_time() - c
+            shutil.rmtree(Path(tmp) / f"again{r}")  # (a new folder each round, removed outside the timing)
+            cpu["bare cast"] += bare_cast_cpu_s(sim.raycaster, rays, sensor) * frames
+            cpu["files"] += floor_write_cpu_s(Path(tmp) / f"floor{r}", frames, sizes) * frames
+            shutil.rmtree(Path(tmp) / f"floor{r}")
+            cpu["noise"] += floor_noise_cpu_s(returns // frames) * frames
+        per = {k: v / (rounds * frames) for k, v in cpu.items()}
+    t_bare = bare_cast_wall_s(sim.raycaster, rays[:: max(1, frames // 10)], sensor)
     streaming = (frames - 1) / (t_end - marks[0])  # first sweep done -> folder committed
     total = frames / done.seconds
     per_return = {k: v / returns for k, v in sizes.items()}
+    floor = per["bare cast"] + per["files"] + per["noise"]
     print(f"end to end: salo simulate --scene {scene_name} --seed {seed} --frames {frames} --sensor {sensor.name} "
           f"({returns / frames:.0f} returns per sweep)")
-    print(f"  bare embreex, {rc.threads} threads, same rays      {1 / t_bare:6.1f} sweeps/s")
+    print(f"  bare embreex, {sim.raycaster.threads} threads, same rays      {1 / t_bare:6.1f} sweeps/s")
     print(f"  simulate, truth written (streaming)          {streaming:6.1f} sweeps/s   "
           f"{1 / (streaming * t_bare):.2f}x the bare cast's time")
     print(f"  simulate, whole call (BVH, inside check)     {total:6.1f} sweeps/s   "
           f"({t_end - t0:.1f} s, of which {marks[0] - t0:.1f} s before the first sweep was done)")
-    print(f"  CPU time per sweep (all threads; what other jobs on the machine do not change): simulate "
-          f"{1e3 * cpu_sim / frames:.0f} ms, bare cast {1e3 * cpu_bare:.0f} ms ({cpu_sim / frames / cpu_bare:.2f}x)")
+    print(f"  CPU time per sweep (all threads; what other jobs on the machine do not change), {rounds} interleaved "
+          f"rounds of {frames} sweeps: simulate {1e3 * per['simulate']:.1f} ms (writing included), bare cast "
+          f"{1e3 * per['bare cast']:.1f} ms ({per['simulate'] / per['bare cast']:.2f}x)")
     print(f"  on disk per return: scan {per_return['velodyne']:.1f} B + truth {per_return['sidecar']:.1f} B = "
           f"{sum(per_return.values()):.1f} B")
-    floor = cpu_bare + cpu_floor_write + cpu_floor_noise
     print(f"  floor beyond the cast, CPU per sweep: the frame's files written new with their sha256 "
-          f"{1e3 * cpu_floor_write:.1f} ms, its range noise drawn {1e3 * cpu_floor_noise:.1f} ms: on 2 fully used "
-          f"cores at best {floor / cpu_bare:.2f}x the bare cast's time (no truth computed, nothing encoded)")
+          f"{1e3 * per['files']:.1f} ms, its range noise drawn {1e3 * per['noise']:.1f} ms; floor "
+          f"{1e3 * floor:.1f} ms ({floor / per['bare cast']:.2f}x the bare cast's time: no truth computed, nothing "
+          f"encoded)")
+    print(f"  simulate / floor: {per['simulate'] / floor:.2f}x")
     if imu:
         import dataclasses
 
@@ -207,6 +216,100 @@ def bench_end_to_end(scene_name: str, seed: int, sensor_name: str, frames: int, 
               f"{cpu_imu / cpu_sim:.3f}x the run with it off (wall {wall_imu / (t_end - t0):.3f}x); the IMU's "
               f"samples alone {1e3 * cpu_model:.0f} ms for the {frames * sensor.sweep_period_s:g} s; "
               f"imu.csv + imu_truth.csv {imu_bytes / 1e6:.2f} MB")
+
+
+def warm_up(world: World, sensor) -> None:
+    """One sweep of a small part of ``world``: the compiled kernels loaded (or compiled) before timing."""
+    keep = slice(0, min(len(world.faces), 2000))
+    small = World(world.vertices, world.faces[keep], world.face_object_id[keep], world.object_labels, "warm-up")
+    traj = SampledTrajectory(np.array([0.0]), np.eye(4)[None])
+    for motion in (True, False):
+        sim = SweepSimulator(small, sensor, seed=0, motion_distortion=motion, threads=1)
+        scan = sim.sweep(traj, 0.0)
+    from simlidar.degeneracy import degeneracy
+    from simlidar.formats import truth
+
+    truth.encode(np.zeros(len(scan), np.int64), scan.true_range_m, scan.normal, np.zeros(len(scan), np.int64), None, 4)
+    degeneracy(scan.true_xyz, scan.normal)
+
+
+def frame_rays(sim: SweepSimulator, trajectory, starts: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The rays of sweeps starting at ``starts`` (s), each from its firing pose, float32 in the BVH's frame."""
+    rays = []
+    for t in starts:
+        T = trajectory.pose_at(t + sim._times_unique)
+        d = np.einsum("nij,nj->ni", T[sim._ray_time_idx, :3, :3], sim._dir_local)
+        o = T[sim._ray_time_idx, :3, 3] - sim.raycaster.offset
+        rays.append((np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)))
+    return rays
+
+
+def bare_cast_cpu_s(rc, rays, sensor) -> float:
+    """CPU seconds per sweep of the bare threaded Embree call on ``rays`` (no noise, no truth, nothing written)."""
+    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
+    c = time.process_time()
+    for o32, d32 in rays:
+        rc.cast_raw(o32, d32, dist)
+    return (time.process_time() - c) / len(rays)
+
+
+def bare_cast_wall_s(rc, rays, sensor, repeats: int = 3) -> float:
+    """Wall seconds per sweep of the bare threaded Embree call on ``rays`` (after one warm-up cast)."""
+    dist = np.full(sensor.rays_per_sweep, sensor.max_range_m + 1.0, np.float32)
+    rc.cast_raw(*rays[0], dist)
+    t = time.perf_counter()
+    for _ in range(repeats):
+        for o32, d32 in rays:
+            rc.cast_raw(o32, d32, dist)
+    return (time.perf_counter() - t) / (repeats * len(rays))
+
+
+def bench_actors(scene_name: str, seed: int, sensor_name: str, repeats: int, counts=(20, 100)) -> None:
+    """CPU per sweep with ``counts`` moving actors near the sensor against the static world, sweeps interleaved.
+
+    The actors are the scene's traffic at high densities (``scenes.traffic``: vehicles, cyclists, people), the
+    ``n`` nearest the sensor in the middle of the swept time, so that all of them are in its range.
+    """
+    import scenes
+    from simlidar.raycast import Raycaster
+    from tools.worlds import world_of_scene
+
+    sensor = load_sensor(sensor_name)
+    dense = {"enabled": True, "cars_per_km": 150.0, "vans_per_km": 30.0, "lorries_per_km": 15.0, "buses_per_km": 8.0,
+             "cyclists_per_km": 40.0, "pedestrians_per_km": 400.0}
+    scene = scenes.build_scene(scene_name, seed=seed, traffic=dense)
+    t0 = 20.0
+    times = t0 + 0.1 * np.arange(repeats)
+    ego = scene.trajectory.pose_at(np.array([times.mean()]))[0, :3, 3]
+    dist = np.array([np.linalg.norm(a.motion_at(np.array([times.mean()]))[0][0, :3, 3] - ego) for a in scene.actors])
+    order = np.argsort(dist)
+    world = world_of_scene(scene)
+    rc = Raycaster(world.vertices, world.faces)
+    sims = {"static": SweepSimulator(world.without_actors(), sensor, seed=seed, raycaster=rc)}
+    for n in counts:
+        if n > len(order):
+            print(f"actors: the scene's dense traffic has {len(order)} actors, not {n}: skipped")
+            continue
+        chosen = World(world.vertices, world.faces, world.face_object_id, world.object_labels, world.source,
+                       actors=[scene.actors[i] for i in order[:n]])
+        sims[f"{n} actors"] = SweepSimulator(chosen, sensor, seed=seed, raycaster=rc)
+        print(f"  {n} actors: the farthest {dist[order[n - 1]]:.0f} m from the sensor in the middle of the sweeps")
+    cpu = dict.fromkeys(sims, 0.0)
+    on_actors = dict.fromkeys(sims, 0)
+    for sim in sims.values():
+        sim.sweep(scene.trajectory, t0 - 1.0)  # warm up (the actors' BVHs, the kernels)
+    for k, t in enumerate(times):
+        for name, sim in sims.items():
+            c = time.process_time()
+            scan = sim.sweep(scene.trajectory, float(t), frame_index=k)
+            cpu[name] += time.process_time() - c
+            on_actors[name] += int(np.sum(scan.object_id >= len(world.object_labels)))
+    ref = cpu["static"]
+    print(f"actors: {repeats} sweeps each of {sensor_name} in {scene_name} seed {seed} from {t0:g} s, CPU per sweep "
+          "(all threads), interleaved")
+    for name in sims:
+        print(f"  {name:10s} {1e3 * cpu[name] / repeats:6.1f} ms  {cpu[name] / ref:5.2f}x the static sweep   "
+              f"({on_actors[name] / repeats:,.0f} returns a sweep off the actors)")
 
 
 WEATHER_RUNS = {
@@ -378,6 +481,8 @@ def main() -> None:
     ap.add_argument("--imu", action="store_true", help="run the end-to-end simulation again with the IMU on")
     ap.add_argument("--weather-repeats", type=int, default=20,
                     help="sweeps of each weather run (0: skip the weather's cost)")
+    ap.add_argument("--actors-repeats", type=int, default=20,
+                    help="sweeps of each moving-actor run, 20 and 100 actors against none (0: skip)")
     args = ap.parse_args()
     t = time.perf_counter()
     world = bench_world()
@@ -387,6 +492,8 @@ def main() -> None:
         bench_end_to_end(args.e2e_scene, args.e2e_seed, args.sensor, args.e2e_frames, args.tmp, args.imu)
     if args.weather_repeats:
         bench_weather(args.e2e_scene, args.e2e_seed, args.sensor, args.weather_repeats)
+    if args.actors_repeats:
+        bench_actors(args.e2e_scene, args.e2e_seed, args.sensor, args.actors_repeats)
     if args.big_world:
         bench_big_world(args.big_world, args.sensor, args.big_frames, args.tmp)
     if args.memory:

@@ -63,7 +63,8 @@ class SuiteSequence:
 
     noise_std_m: range noise (1 sigma), m. start_s: time along the path of the first sweep, s
     (families in ``PLACED_START``: None, the start is placed by a feature of the path). weather: a
-    condition of ``tools.weather_conditions`` (the weather suite), None without.
+    condition of ``tools.weather_conditions`` (the weather suite), None without. traffic: with the
+    family's moving traffic (the traffic suite; ``scenes.traffic``), else its static twin.
     """
 
     family: str
@@ -74,11 +75,13 @@ class SuiteSequence:
     noise_std_m: float
     start_s: float | None
     weather: str | None = None
+    traffic: bool = False
 
     @property
     def name(self) -> str:
         base = f"{self.family}-{self.seed}-{self.sensor}-{self.kind}"
-        return base if self.weather is None else f"{base}-{self.weather}"
+        base = base if self.weather is None else f"{base}-{self.weather}"
+        return f"{base}-traffic" if self.traffic else base
 
 
 def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
@@ -124,6 +127,19 @@ def weather_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families
     return [replace(s, weather=c) for s in suite(seeds, frames, families, kinds) for c in conditions]
 
 
+def traffic_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES,
+                  families: tuple[str, ...] | None = None) -> list[SuiteSequence]:
+    """The traffic suite: the suite's "simulated" sequences of the families with traffic (``TRAFFIC_FAMILIES``)
+    for ``seeds``, each with its moving traffic and then as its static twin (the same seed, no actors)."""
+    from scenes.traffic import FAMILY_TRAFFIC
+
+    families = tuple(f for f in (families or FAMILY_TRAFFIC) if f in FAMILY_TRAFFIC) or ()
+    if not families:
+        raise ValueError(f"no family with traffic among those asked for (families with traffic: "
+                         f"{', '.join(FAMILY_TRAFFIC)})")
+    return [replace(s, traffic=t) for s in suite(seeds, frames, families, ("simulated",)) for t in (True, False)]
+
+
 def suite_world(seq: SuiteSequence):
     """(world, trajectory, sensor, start_s) of a suite sequence: its family drawn, its start placed."""
     from scenes import build_scene
@@ -131,7 +147,7 @@ def suite_world(seq: SuiteSequence):
     from simlidar.sensor import load_sensor
     from tools.worlds import world_of_scene
 
-    scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed))
+    scene = build_scene(family_scene(seq.family), **draw_family_params(seq.family, seq.seed, traffic=seq.traffic))
     world = world_of_scene(scene)
     sensor = load_sensor(seq.sensor).with_overrides(range_noise_std_m=seq.noise_std_m)
     if seq.weather is not None:
@@ -171,9 +187,24 @@ def simulate_to_folder(seq: SuiteSequence, out, force: bool = False):
                              info={"command": "bench", "suite_sequence": asdict(seq)})
 
 
+def standstill_motion_m(gt: np.ndarray, est: np.ndarray, still_m: float = 1e-6) -> float | None:
+    """The motion a method invented while the sensor truly stood still: the summed translation of its poses
+    ``est`` (N, 4, 4) between consecutive frames whose true poses ``gt`` moved less than ``still_m``, m;
+    None when the sensor never stood still."""
+    from simlidar import se3
+
+    step_gt = se3.inverse(gt[:-1]) @ gt[1:]
+    still = (np.linalg.norm(step_gt[:, :3, 3], axis=1) < still_m) & (se3.rotation_angle(step_gt) < still_m)
+    if not still.any():
+        return None
+    step = se3.inverse(est[:-1]) @ est[1:]
+    return float(np.linalg.norm(step[still, :3, 3], axis=1).sum())
+
+
 def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M) -> dict:
     """t_err %, r_err deg/100 m (KITTI protocol over segments of ``lengths_m``), vertical drift %,
-    ATE (aligned, m), RPE per frame (cm, deg), path length (m)."""
+    ATE (aligned, m), RPE per frame (cm, deg), path length (m), the end's position error (m) and the motion
+    invented while standing still (m; None when the sensor never stood still)."""
     from odometry.metrics import evaluate_trajectory, trajectory_distances
 
     if not np.all(np.isfinite(est)):
@@ -186,9 +217,11 @@ def trajectory_figures(gt: np.ndarray, est: np.ndarray, lengths_m: tuple[float, 
         "vertical_drift_pct": 100.0 * float(est[-1, 2, 3] - gt[-1, 2, 3]) / length if length > 0 else float("nan"),
         "ate_aligned_m": m.ate_aligned_rmse_m, "rpe_t_cm": 100.0 * m.rpe.t_stats_m.mean,
         "rpe_r_deg": m.rpe.r_stats_deg.mean, "path_length_m": length, "diverged": False,
+        "end_error_m": float(np.linalg.norm(est[-1, :3, 3] - gt[-1, :3, 3])),
+        "standstill_motion_m": standstill_motion_m(gt, est),
     }
 
 
 __all__ = ["DEFAULT_FRAMES", "EVALUATION_SEEDS", "FAILURE_T_ERR_PCT", "FAMILY_SENSORS", "KINDS", "PLACED_START",
            "SEGMENT_LENGTHS_M", "SENSORS", "SPLITS", "STACKED_SENSORS", "TUNING_SEEDS", "SuiteSequence", "simulate",
-           "simulate_to_folder", "suite", "trajectory_figures"]
+           "simulate_to_folder", "standstill_motion_m", "suite", "traffic_suite", "trajectory_figures"]

@@ -44,14 +44,14 @@ from pathlib import Path
 
 import numpy as np
 
-from simlidar.sequence import DatasetError
+from simlidar.sequence import DatasetError, method_frame
 
 # Per-point fields a lidar driver reports (the simulator's sidecar names).
 SENSOR_FIELDS = ("ring", "time_s", "azimuth_index", "range_m")
 # The default: what the Velodyne driver's XYZIRT cloud carries besides x y z intensity.
 DEFAULT_FIELDS = ("ring", "time_s")
 # The simulator's truth: never handed to a method.
-TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather")
+TRUTH_FIELDS = ("true_range_m", "true_xyz", "normal", "object_id", "weather", "object_class", "moving", "velocity")
 
 
 class StagingError(DatasetError):
@@ -144,7 +144,7 @@ def stage_input(sequence, folder: str | Path, fields=DEFAULT_FIELDS) -> StagedIn
     for k in range(len(sequence)):
         name = f"{k:06d}"
         src = scan_files[k] if scan_files is not None else None
-        frame = sequence[k] if fields or src is None or src.suffix != ".bin" else None
+        frame = method_frame(sequence, k) if fields or src is None or src.suffix != ".bin" else None
         if frame is None:
             _place(src, root / "velodyne" / f"{name}.bin")
         else:

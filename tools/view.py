@@ -33,6 +33,7 @@ LABEL_COLOURS = {
     "rail": (190, 190, 200),
     "light": (250, 240, 180),
     "object": (180, 100, 180),
+    "person": (200, 80, 60),
 }
 
 
@@ -74,12 +75,18 @@ def render_scene(
     scan_ring: np.ndarray | None = None,
     title: str = "",
     size: tuple[int, int] = (1800, 900),
+    moving: np.ndarray | None = None,
+    boxes: np.ndarray | None = None,
+    actors: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
     """Write a two-panel PNG: left a 3D view behind the sensor, right a top-down overview.
 
     vertices: (V, 3) m; faces: (F, 3); face_labels: (F,) str label per triangle;
     path: (M, 3) drivable centre-line, m; T_world_lidar: (4, 4) pose of the scan;
     scan_xyz_world: (N, 3) scan points in the world frame, m; scan_ring: (N,) ring index.
+    moving: (N,) bool, the returns off a moving object (drawn in red over the rest), or None.
+    boxes: (B, 8, 3) the moving objects' boxes in the world, m (drawn as red wireframes), or None.
+    actors: (vertices (V, 3), faces (F, 3)) the moving objects' meshes where they are, or None.
     """
     import pyvista as pv
     from vtkmodules.vtkCommonCore import vtkLogger
@@ -99,12 +106,15 @@ def render_scene(
     # Left: a view from behind and above the sensor, the scan coloured by ring.
     pl.subplot(0, 0)
     pl.add_mesh(mesh, scalars="rgb", rgb=True, show_edges=False, lighting=True)
+    if actors is not None and len(actors[1]):
+        pl.add_mesh(_polydata(*actors), color=(120, 130, 150), lighting=True)
     pl.add_mesh(path_line, color="red", line_width=3)
     if scan_xyz_world is not None and len(scan_xyz_world):
         cloud = pv.PolyData(np.asarray(scan_xyz_world, dtype=float))
         cloud.point_data["ring"] = np.asarray(scan_ring if scan_ring is not None else np.zeros(len(cloud.points)))
         pl.add_mesh(cloud, scalars="ring", cmap="turbo", point_size=2.5, render_points_as_spheres=False,
                     scalar_bar_args={"title": "ring", "vertical": True, "position_x": 0.88, "height": 0.5})
+        _draw_moving(pl, scan_xyz_world, moving, boxes)
     if T_world_lidar is not None:
         origin = T_world_lidar[:3, 3]
         fwd = T_world_lidar[:3, 0]
@@ -139,6 +149,50 @@ def render_scene(
     return out_png
 
 
+def _draw_moving(pl, xyz_world: np.ndarray, moving: np.ndarray | None, boxes: np.ndarray | None) -> None:
+    """The returns off moving objects in red, larger, over the scan; the objects' boxes as red wireframes."""
+    import pyvista as pv
+
+    if moving is not None and np.any(moving):
+        pl.add_mesh(pv.PolyData(np.asarray(xyz_world, float)[np.asarray(moving, bool)]), color=(230, 30, 40),
+                    point_size=4.5, render_points_as_spheres=False)
+    for corners in () if boxes is None else boxes:
+        edges = [(0, 1), (1, 3), (3, 2), (2, 0), (4, 5), (5, 7), (7, 6), (6, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
+        cells = np.hstack([[2, a, b] for a, b in edges])
+        pl.add_mesh(pv.PolyData(np.asarray(corners, float), lines=cells), color=(230, 30, 40), line_width=2)
+
+
+def _track_rotations(tracks: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    q = tracks["quaternion"]
+    return Rotation.from_quat(np.column_stack([q[:, 1:], q[:, :1]])).as_matrix()
+
+
+def actor_meshes(tracks: np.ndarray, T_world_scan: np.ndarray, models: list) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V, 3), faces (F, 3)) of the moving objects' meshes in the world, each placed by its track row
+    (``models``: its ``scenes.actors.ActorModel`` per row)."""
+    verts, faces, base = [np.zeros((0, 3))], [np.zeros((0, 3), np.int64)], 0
+    for row, R, m in zip(tracks, _track_rotations(tracks) if len(tracks) else [], models, strict=True):
+        v = (m.vertices - m.box_centre) @ R.T + row["centre"]
+        verts.append(v @ T_world_scan[:3, :3].T + T_world_scan[:3, 3])
+        faces.append(m.faces + base)
+        base += len(v)
+    return np.vstack(verts), np.vstack(faces)
+
+
+def box_corners(tracks: np.ndarray, T_world_scan: np.ndarray) -> np.ndarray:
+    """(B, 8, 3) the corners in the world of tracks' boxes (``simlidar.formats.tracks.TRACK_DTYPE`` rows in the
+    scan frame ``T_world_scan`` (4, 4) places), corner k at the box's (+-x, +-y, +-z) by the bits of k."""
+    if len(tracks) == 0:
+        return np.zeros((0, 8, 3))
+    signs = np.array([[(k >> 2) & 1, (k >> 1) & 1, k & 1] for k in range(8)], float) * 2 - 1
+    R = _track_rotations(tracks)
+    local = signs[None] * tracks["size"][:, None, :] / 2
+    scan = np.einsum("bij,bkj->bki", R, local) + tracks["centre"][:, None, :]
+    return scan @ T_world_scan[:3, :3].T + T_world_scan[:3, 3]
+
+
 # ---------------------------------------------------------------- what to draw
 class ViewError(ValueError):
     """A view cannot be made from what was given; the message says why."""
@@ -150,7 +204,8 @@ class View:
 
     vertices: (V, 3) m; faces: (F, 3); labels: (F,) label per triangle; path: (M, 3) m;
     T: (4, 4) ``T_world_lidar`` of the scan; xyz: (N, 3) scan points in the world frame, m;
-    ring: (N,) ring per point.
+    ring: (N,) ring per point. moving: (N,) bool, the returns off moving objects, and boxes: (B, 8, 3) their
+    boxes in the world (``box_corners``), or None (a world where nothing moves).
     """
 
     vertices: np.ndarray
@@ -161,12 +216,15 @@ class View:
     xyz: np.ndarray
     ring: np.ndarray
     title: str
+    moving: np.ndarray | None = None
+    boxes: np.ndarray | None = None
+    actors: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def draw_view(view: View, out_png: str | Path) -> Path:
     """Render a ``View`` to a PNG (``render_scene``)."""
     return render_scene(view.vertices, view.faces, view.labels, view.path, out_png, view.T, view.xyz, view.ring,
-                        title=view.title)
+                        title=view.title, moving=view.moving, boxes=view.boxes, actors=view.actors)
 
 
 def scene_view(scene, sensor, at: float = 0.5) -> View:
@@ -181,7 +239,9 @@ def scene_view(scene, sensor, at: float = 0.5) -> View:
     T = traj.pose_at(np.array([t0]))[0]
     return View(scene.vertices, scene.faces, scene.label_of_face(), scene.path, T,
                 scan.xyz @ T[:3, :3].T + T[:3, 3], scan.ring,
-                f"{scene.name} seed {scene.params['seed']}: {sensor.name} scan at t = {t0:.1f} s ({len(scan)} points)")
+                f"{scene.name} seed {scene.params['seed']}: {sensor.name} scan at t = {t0:.1f} s ({len(scan)} points)",
+                scan.moving, None if scan.tracks is None else box_corners(scan.tracks, T),
+                None if scan.tracks is None else actor_meshes(scan.tracks, T, _models(scene, scan.tracks)))
 
 
 def pick_frame(n: int, times: np.ndarray | None, at: float | None, frame: int | None, name: str = "") -> int:
@@ -267,8 +327,25 @@ def sequence_view(folder: Path, at: float | None = None, frame_index: int | None
         vertices, faces = world.vertices, world.faces
         labels = np.asarray(world.object_labels, dtype=object)[world.face_object_id]
         title = f"{folder.name}: mesh {mesh.name}, {what}"
-    return View(vertices, faces, labels, path, T, frame.points @ T[:3, :3].T + T[:3, 3], ring, title)
+    moving = boxes = actors = None
+    if frame.fields is not None and "moving" in (frame.fields.dtype.names or ()):  # a world with moving objects
+        from simlidar.formats.tracks import FILE, read_tracks
+
+        moving = frame.fields["moving"]
+        if (folder / FILE).is_file():
+            frames, rows = read_tracks(folder / FILE)
+            boxes = box_corners(rows[frames == k], T)
+            if manifest.get("scene"):
+                actors = actor_meshes(rows[frames == k], T, _models(scene, rows[frames == k]))
+    return View(vertices, faces, labels, path, T, frame.points @ T[:3, :3].T + T[:3, 3], ring, title, moving, boxes,
+                actors)
 
 
-__all__ = ["View", "ViewError", "draw_view", "marker_radius_m", "pick_frame", "render_scene", "scene_view",
+def _models(scene, tracks: np.ndarray) -> list:
+    """The model of each track row's moving object (its object id counts after the scene's static objects)."""
+    return [scene.actors[int(i) - len(scene.object_labels)].model for i in tracks["object_id"]]
+
+
+__all__ = ["View", "ViewError", "actor_meshes", "box_corners", "draw_view", "marker_radius_m", "pick_frame",
+           "render_scene", "scene_view",
            "sequence_view"]

@@ -29,11 +29,12 @@ def jsonable(value: Any) -> Any:
 
 
 def world_of_scene(scene, source: str | None = None):
-    """A built ``scenes`` scene as a ``simlidar.world.World`` (source: default ``scene:NAME``)."""
+    """A built ``scenes`` scene as a ``simlidar.world.World`` (source: default ``scene:NAME``), its moving
+    objects (``scene.actors``) with it."""
     from simlidar.world import World
 
     return World(scene.vertices, scene.faces, scene.face_object_id, scene.object_labels,
-                 f"scene:{scene.name}" if source is None else source)
+                 f"scene:{scene.name}" if source is None else source, actors=list(scene.actors or []))
 
 
 @dataclass(frozen=True)

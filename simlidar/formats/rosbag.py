@@ -390,6 +390,10 @@ class RosbagSequence:
         k = int(k) % len(self)
         return self._frame(k, self._raw_message(k))
 
+    def frame(self, k: int, truth: bool = True) -> Frame:
+        """Frame ``k`` (a bag carries no per-return truth)."""
+        return self[k]
+
     def close(self) -> None:
         """Close the bag file (reopened when a frame is asked for again)."""
         self._close_reader()

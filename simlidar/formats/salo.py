@@ -46,9 +46,10 @@ import numpy as np
 
 from .. import __version__, se3
 from ..degeneracy import CSV_HEADER, csv_row, degeneracy
+from ..kernels.files import pack_points
 from ..sensor import LidarModel, load_sensor_file
 from ..sequence import DatasetError
-from . import truth
+from . import tracks, truth
 from .atomic import StagedFolder, sha256_file, write_checksummed
 from .imu_csv import IMU_FILE, IMU_TRUTH_FILE, format_imu_csv, format_imu_truth_csv, read_imu_csv, read_imu_truth_csv
 from .kitti import format_kitti_poses, format_times, read_kitti_poses, read_times
@@ -110,6 +111,8 @@ class SequenceWriter:
         self._degeneracy_rows: dict[int, str] = {}
         self._points = 0
         self._blocks = False  # some frame's truth has an optional block: the folder is version 3
+        self._scratch: dict = {}  # the writer thread's buffers, reused frame after frame
+        self._tracks: dict[int, str] = {}  # per frame, the moving objects' rows of tracks.csv
         self._bytes = {"velodyne": 0, "sidecar": 0}
         self._queue: queue.Queue = queue.Queue(maxsize=max(1, queue_frames))
         self._thread: threading.Thread | None = None
@@ -171,9 +174,12 @@ class SequenceWriter:
 
     def _write_frame(self, k: int, scan) -> None:
         name = f"{k:06d}"
-        points = np.empty((len(scan.xyz), 4), dtype="<f4")
-        points[:, :3] = scan.xyz
-        points[:, 3] = scan.intensity
+        # the frame's bytes are built in buffers kept from frame to frame: no new memory to touch each frame
+        points = self._scratch.get("points")
+        if points is None or len(points) < len(scan.xyz):
+            points = self._scratch["points"] = np.empty((int(1.25 * len(scan.xyz)) + 1, 4), dtype="<f4")
+        points = points[:len(scan.xyz)]
+        pack_points(np.asarray(scan.xyz, np.float64), np.asarray(scan.intensity, np.float32), points)
         if self.format_version == 1:
             import io
 
@@ -184,9 +190,13 @@ class SequenceWriter:
             knots = None if scan.motion is None else truth.motion_knots(scan.motion)
             ray = np.asarray(scan.azimuth_index, dtype=np.int64) * self.sensor.rings + scan.ring
             weather = getattr(scan, "weather", None)
+            actors = None if getattr(scan, "object_class", None) is None else (scan.object_class, scan.moving,
+                                                                                scan.velocity)
             car = truth.encode(ray, scan.true_range_m, scan.normal, scan.object_id, knots, self.id_bytes,
-                               compress=self.compress_truth, weather=weather)
-            self._blocks |= weather is not None
+                               compress=self.compress_truth, weather=weather, actors=actors, scratch=self._scratch)
+            self._blocks |= weather is not None or actors is not None
+        if getattr(scan, "tracks", None) is not None:
+            self._tracks[k] = tracks.format_rows(k, scan.tracks)
         for rel, data in ((f"velodyne/{name}.bin", memoryview(points).cast("B")),
                           (f"sidecar/{name}{SIDECAR_SUFFIX[self.format_version]}", car)):
             self._checksums[rel] = write_checksummed(self.tmp / rel, data)
@@ -207,6 +217,8 @@ class SequenceWriter:
             "degeneracy.csv": CSV_HEADER + "\n" + "".join(self._degeneracy_rows[k] + "\n"
                                                           for k in sorted(self._degeneracy_rows)),
         }
+        if self._tracks:
+            texts[tracks.FILE] = tracks.HEADER + "\n" + "".join(self._tracks[k] for k in sorted(self._tracks))
         imu_info = {}
         if self.imu is not None:
             samples, imu_truth = self.imu
@@ -269,12 +281,12 @@ def open_salo(path: Path, sensor: LidarModel | None = None, poses: str | Path | 
     own = load_sensor_file(path / "sensor.yaml")  # the firing table the truth was written with
     reader = None
     if version in (2, 3):
-        def reader(car: Path, xyz: np.ndarray) -> np.ndarray:
+        def reader(car: Path, xyz: np.ndarray, with_truth: bool = True) -> np.ndarray:
             try:
                 data = car.read_bytes()
             except OSError as exc:
                 raise DatasetError(f"{car}: cannot read truth ({exc.strerror})") from None
-            return truth.decode(data, xyz, own, where=car)
+            return truth.decode(data, xyz, own, where=car, truth=with_truth)
     imu = imu_truth = None
     if "imu" in manifest:
         for f in (IMU_FILE, IMU_TRUTH_FILE):

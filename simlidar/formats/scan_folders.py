@@ -39,8 +39,8 @@ class Sequence:
     Attributes:
         path: the folder. kind: "salo", "kitti", "pcd" or "scans".
         scan_files: one ``.bin`` or ``.ply`` per frame. sidecar_files: one per frame, or None: ``.npy``
-            structured arrays, or whatever ``read_sidecar(file, xyz)`` turns into one (given the
-            frame's (N, 3) float32 points; the simulator's compact truth).
+            structured arrays, or whatever ``read_sidecar(file, xyz, with_truth)`` turns into one (given
+            the frame's (N, 3) float32 points; the simulator's compact truth, its truth read or not).
         sensor: LidarModel or None. poses: (N, 4, 4) ``T_first_lidar`` or None.
         times: (N,) s or None. manifest: dict (simulated sequences) or {}.
         imu: ``simlidar.imu.ImuSamples`` or None; imu_truth: ``simlidar.imu.ImuTruth`` or None (simulated
@@ -49,7 +49,7 @@ class Sequence:
 
     def __init__(self, path: Path, kind: str, scan_files: list[Path], sensor, poses, times,
                  manifest: dict | None = None, sidecar_files: list[Path] | None = None,
-                 read_sidecar: Callable[[Path, np.ndarray], np.ndarray] | None = None,
+                 read_sidecar: Callable[[Path, np.ndarray, bool], np.ndarray] | None = None,
                  imu=None, imu_truth=None):
         self.path = path
         self.kind = kind
@@ -86,6 +86,11 @@ class Sequence:
             yield self[k]
 
     def __getitem__(self, k: int) -> Frame:
+        return self.frame(k)
+
+    def frame(self, k: int, truth: bool = True) -> Frame:
+        """Frame ``k``; truth=False: a simulated sequence's per-return truth is left unread (its fields are
+        the firing ones, ``simlidar.formats.truth.FIRING_DTYPE``: what a method may read)."""
         if not -len(self) <= k < len(self):
             raise IndexError(f"{self.path}: frame {k} out of range (0..{len(self) - 1})")
         k = k % len(self)
@@ -100,7 +105,7 @@ class Sequence:
         if self.sidecar_files is not None:
             car = self.sidecar_files[k]
             if self.read_sidecar is not None:
-                fields = self.read_sidecar(car, data[:, :3])
+                fields = self.read_sidecar(car, data[:, :3], truth)
             else:
                 try:
                     fields = np.load(car, allow_pickle=False)

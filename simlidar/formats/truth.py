@@ -18,6 +18,11 @@ One file per frame, ``sidecar/NNNNNN.truth``, beside the frame's KITTI ``.bin``
     object   N x uW: the object hit; W is the fewest bytes that hold the world's object count
     weather  (block bit 0, ``BLOCK_WEATHER``) N x u1: what each return is, ``simlidar.weather.KINDS``
              (0 a surface, 1 fog, 2 rain, 3 snow)
+    actors   (block bit 1, ``BLOCK_ACTORS``) N x u1 ``what``: 0 the static world, else the moving object's
+             class in bits 0-6 (``ACTOR_CLASSES``: 1 car, 2 van, 3 lorry, 4 bus, 5 cyclist, 6 pedestrian)
+             and bit 7 set when the surface hit was moving at the return's instant (faster than
+             ``MOVING_SPEED_M_S``); then M x 3 i2, one row per return whose ``what`` is not 0, in
+             order: the velocity of the point hit (in the world, along the scan frame's axes), cm/s
 
 Optional blocks (format version 3). A block is a set of per-return fields of
 its own, present when its bit of the header's byte B is set, stored after the
@@ -29,7 +34,11 @@ sequence's manifest says ``format_version`` 3 only when some frame has a block
 the surface its beam reached, if any; a beam that reached none stores range
 NaN (normal and object written as 0), decoded as true_xyz and normal NaN and
 object_id -1. The decoded record then has the field ``weather``
-(``sidecar_dtype(weather=True)``).
+(``sidecar_dtype(weather=True)``). The actors block (bit 1, ``simlidar.actors``: cars,
+lorries, cyclists, pedestrians moving through the world): the decoded record has the
+fields ``object_class`` (u1, 0 for the static world), ``moving`` (bool) and ``velocity``
+(3 float32, m/s; zero on the static world), ``sidecar_dtype(actors=True)``. The
+velocity is rounded to 1 cm/s (``VELOCITY_STEP_M_S``).
 
 that is 14 bytes a return (16 for worlds of more than 65,536 objects) plus 24
 bytes a column for the motion (salo32 in a city: 0.8 bytes a return), against
@@ -69,6 +78,7 @@ import zlib
 
 import numpy as np
 
+from ..kernels.files import fill_body
 from ..sequence import DatasetError
 
 MAGIC = b"SALOTRU2"
@@ -96,13 +106,25 @@ SIDECAR_DTYPE = np.dtype(
 # Optional blocks: the header's byte 18, a bit each.
 BLOCKS_BYTE = 18
 BLOCK_WEATHER = 1
-KNOWN_BLOCKS = BLOCK_WEATHER
+BLOCK_ACTORS = 2
+KNOWN_BLOCKS = BLOCK_WEATHER | BLOCK_ACTORS
 WEATHER_DTYPE = np.dtype(SIDECAR_DTYPE.descr + [("weather", "u1")])
+# What a method may read of a return (``decode(..., truth=False)``): when and by which beam it was measured.
+FIRING_DTYPE = np.dtype(SIDECAR_DTYPE.descr[:4])
+ACTOR_FIELDS = [("object_class", "u1"), ("moving", "?"), ("velocity", "<f4", (3,))]
+# The classes of moving objects, by their code in the actors block (0: the static world).
+ACTOR_CLASSES = ("world", "car", "van", "lorry", "bus", "cyclist", "pedestrian")
+MOVING_BIT = 0x80
+MOVING_SPEED_M_S = 0.01  # a surface faster than this moves (1 cm/s: the velocity's own step)
+VELOCITY_STEP_M_S = 0.01
 
 
-def sidecar_dtype(weather: bool = False) -> np.dtype:
-    """The decoded per-point record: ``SIDECAR_DTYPE``, with the ``weather`` field (u1) when the truth has one."""
-    return WEATHER_DTYPE if weather else SIDECAR_DTYPE
+def sidecar_dtype(weather: bool = False, actors: bool = False) -> np.dtype:
+    """The decoded per-point record: ``SIDECAR_DTYPE``, with the ``weather`` field (u1) when the truth has one,
+    and the actors' fields (``ACTOR_FIELDS``: object_class, moving, velocity) when it has those."""
+    if not actors:
+        return WEATHER_DTYPE if weather else SIDECAR_DTYPE
+    return np.dtype((WEATHER_DTYPE if weather else SIDECAR_DTYPE).descr + ACTOR_FIELDS)
 
 
 def object_id_bytes(n_objects: int) -> int:
@@ -184,40 +206,79 @@ def motion_knots(T_start_fire: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------- encode / decode
 def encode(ray: np.ndarray, true_range_m: np.ndarray, normal: np.ndarray, object_id: np.ndarray,
-           knots: np.ndarray | None, id_bytes: int, compress: bool = False, weather: np.ndarray | None = None) -> bytes:
+           knots: np.ndarray | None, id_bytes: int, compress: bool = False, weather: np.ndarray | None = None,
+           actors: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, scratch: dict | None = None):
     """One frame's truth file as bytes (see the module doc).
 
     ray: (N,) firing index. true_range_m: (N,) m. normal: (N, 3) unit, sweep-start frame, or
     (N, 2) int16 octahedral codes already. object_id: (N,) >= 0. knots: (K, 6) float32 or None.
     id_bytes: 1, 2 or 4. compress: zlib (level 1) the part after the header. weather: (N,) uint8
     kinds (the weather block), or None; its returns without a surface (true range NaN) may carry
-    any normal and object id (NaN, -1): 0 is written.
+    any normal and object id (NaN, -1): 0 is written. actors: (object_class (N,) uint8, moving (N,)
+    bool, velocity (N, 3) m/s) (the actors block), or None. scratch: a dict the caller keeps between
+    frames; the file is then built in a buffer it holds (no new memory to touch each frame) and
+    returned as a memoryview of it, valid until the next call with the same scratch.
     """
     n = len(ray)
     knots = np.zeros((0, KNOT_FLOATS), "<f4") if knots is None else np.ascontiguousarray(knots, "<f4")
     ids = np.asarray(object_id)
+    true_range_m = np.asarray(true_range_m)
+    live = ids[~np.isnan(true_range_m)] if weather is not None else ids  # a bare weather return's id is written 0
+    if len(live) and (live.min() < 0 or live.max() >= 1 << (8 * id_bytes)):
+        raise ValueError(f"object ids {live.min()}..{live.max()} do not fit in {id_bytes} bytes")
+    if weather is not None and len(weather) != n:
+        raise ValueError(f"{len(weather)} weather kinds for {n} returns")
+    what = velocity_cm = None
+    if actors is not None:
+        object_class, moving, velocity = actors
+        if not len(object_class) == len(moving) == len(velocity) == n:
+            raise ValueError(f"actors' truth of {len(object_class)}, {len(moving)}, {len(velocity)} rows for {n} "
+                             "returns")
+        what = np.asarray(object_class, np.uint8) | np.where(moving, MOVING_BIT, 0).astype(np.uint8)
+        velocity_cm = np.rint(np.asarray(velocity, np.float64)[what != 0] / VELOCITY_STEP_M_S)
+        velocity_cm = np.clip(velocity_cm, -32767, 32767).astype("<i2")
+    sizes = [knots.nbytes, 4 * n, 4 * n, 4 * n, id_bytes * n, 0 if weather is None else n,
+             0 if what is None else n + velocity_cm.nbytes]
+    total = HEADER_BYTES + sum(sizes)
+    if scratch is None:
+        buf = np.empty(total, np.uint8)
+    else:
+        buf = scratch.get("truth")
+        if buf is None or len(buf) < total:
+            buf = scratch["truth"] = np.empty(max(total, int(1.25 * total)), np.uint8)
+        buf = buf[:total]
+    buf[:HEADER_BYTES] = 0
+    buf[:8] = np.frombuffer(MAGIC, np.uint8)
+    buf[8:16] = np.frombuffer(np.array([n, len(knots)], "<u4").tobytes(), np.uint8)
+    buf[16] = id_bytes
+    buf[17] = 1 if compress else 0
+    buf[BLOCKS_BYTE] = (0 if weather is None else BLOCK_WEATHER) | (0 if what is None else BLOCK_ACTORS)
+    off = HEADER_BYTES
+    buf[off:off + knots.nbytes] = knots.view(np.uint8).ravel()
+    off += knots.nbytes
+    views = []
+    for dtype, count in (("<u4", n), ("<f4", n), ("<i2", 2 * n), (f"<u{id_bytes}", n)):
+        size = np.dtype(dtype).itemsize * count
+        views.append(buf[off:off + size].view(dtype))
+        off += size
+    codes = normal if normal.dtype == np.int16 else None
+    fill_body(np.asarray(ray), true_range_m, np.zeros((0, 3)) if codes is not None else np.asarray(normal, np.float64),
+              ids, weather is not None, *views)
+    if codes is not None:
+        views[2][:] = np.ascontiguousarray(codes, "<i2").ravel()
+        if weather is not None:
+            views[2].reshape(n, 2)[np.isnan(true_range_m)] = 0
     if weather is not None:
-        bare = np.isnan(np.asarray(true_range_m, dtype=np.float64))
-        if bare.any():
-            normal, ids = np.array(normal, copy=True), np.array(ids, copy=True)
-            normal[bare], ids[bare] = 0, 0
-    codes = normal if normal.dtype == np.int16 else octahedral_encode(normal)
-    if n and (ids.min() < 0 or ids.max() >= 1 << (8 * id_bytes)):
-        raise ValueError(f"object ids {ids.min()}..{ids.max()} do not fit in {id_bytes} bytes")
-    header = np.zeros(HEADER_BYTES, np.uint8)
-    header[:8] = np.frombuffer(MAGIC, np.uint8)
-    header[8:16] = np.frombuffer(np.array([n, len(knots)], "<u4").tobytes(), np.uint8)
-    header[16] = id_bytes
-    header[17] = 1 if compress else 0
-    parts = [knots.tobytes(), np.asarray(ray, "<u4").tobytes(), np.asarray(true_range_m, "<f4").tobytes(),
-             np.ascontiguousarray(codes, "<i2").tobytes(), ids.astype(f"<u{id_bytes}").tobytes()]
-    if weather is not None:
-        if len(weather) != n:
-            raise ValueError(f"{len(weather)} weather kinds for {n} returns")
-        header[BLOCKS_BYTE] |= BLOCK_WEATHER
-        parts.append(np.asarray(weather, "u1").tobytes())
-    body = b"".join(parts)
-    return header.tobytes() + (zlib.compress(body, 1) if compress else body)
+        buf[off:off + n] = weather
+        off += n
+    if what is not None:
+        buf[off:off + n] = what
+        off += n
+        buf[off:off + velocity_cm.nbytes] = velocity_cm.view(np.uint8).ravel()
+        off += velocity_cm.nbytes
+    if compress:
+        return buf[:HEADER_BYTES].tobytes() + zlib.compress(buf[HEADER_BYTES:], 1)
+    return memoryview(buf) if scratch is not None else buf.tobytes()
 
 
 def read_header(data: bytes, where) -> tuple[int, int, int, bytes]:
@@ -242,18 +303,25 @@ def read_header(data: bytes, where) -> tuple[int, int, int, bytes]:
         except zlib.error as exc:
             raise DatasetError(f"{where}: damaged compressed truth ({exc})") from None
     expected = k * KNOT_FLOATS * 4 + n * (4 + 4 + 4 + width + (1 if blocks & BLOCK_WEATHER else 0))
+    if blocks & BLOCK_ACTORS and len(body) >= expected + n:  # the moving returns' velocities follow their classes
+        what = np.frombuffer(body, "u1", n, expected)
+        expected += n + 6 * int(np.count_nonzero(what))
+    elif blocks & BLOCK_ACTORS:
+        expected += n
     if len(body) != expected:
         raise DatasetError(f"{where}: {len(body) + HEADER_BYTES:,} bytes, the header's {n:,} returns and {k} knots "
                            f"need {expected + HEADER_BYTES:,} (truncated or damaged)")
     return n, k, width, body
 
 
-def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file") -> np.ndarray:
+def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file", truth: bool = True) -> np.ndarray:
     """A truth file's bytes and its frame's (N, 3) ``.bin`` points -> (N,) ``sidecar_dtype`` records (with the
     ``weather`` field when the file has the weather block).
 
-    sensor: the sequence's own ``LidarModel`` (its rings and firing table). Raises DatasetError
-    naming ``where`` when the file is malformed or does not match the points.
+    sensor: the sequence's own ``LidarModel`` (its rings and firing table). truth: False gives only the
+    firing fields (``FIRING_DTYPE``: ring, column, time, measured range), what a method reads, at a
+    small part of the cost. Raises DatasetError naming ``where`` when the file is malformed or does
+    not match the points.
     """
     blocks = data[BLOCKS_BYTE] if len(data) > BLOCKS_BYTE else 0
     n, k, width, data = read_header(data, where)
@@ -270,19 +338,30 @@ def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file") -> np.ndarr
     off += 4 * n
     obj = np.frombuffer(data, f"<u{width}", n, off)
     off += width * n
-    weather = np.frombuffer(data, "u1", n, off) if blocks & BLOCK_WEATHER else None
+    weather = None
+    if blocks & BLOCK_WEATHER:
+        weather = np.frombuffer(data, "u1", n, off)
+        off += n
+    what = None
+    if blocks & BLOCK_ACTORS:
+        what = np.frombuffer(data, "u1", n, off)
+        off += n
+        moved = what != 0
+        velocity_cm = np.frombuffer(data, "<i2", 3 * int(moved.sum()), off).reshape(-1, 3)
 
     rings = sensor.rings
     ring, col = ray % rings, ray // rings
     if n and col.max() >= sensor.columns_per_sweep:
         raise DatasetError(f"{where}: firing index {int(ray.max())} beyond the sensor's "
                            f"{sensor.rays_per_sweep} rays per sweep")
-    out = np.empty(n, sidecar_dtype(weather is not None))
+    out = np.empty(n, sidecar_dtype(weather is not None, what is not None) if truth else FIRING_DTYPE)
     out["ring"], out["azimuth_index"] = ring, col
     out["time_s"] = sensor.firing_time_s(ring, col)
     xyz64 = np.asarray(xyz, dtype=np.float64)
     measured = np.linalg.norm(xyz64, axis=1)
     out["range_m"] = measured
+    if not truth:
+        return out
     out["true_range_m"] = true_range
     beam = xyz64 / np.where(measured > 0, measured, 1.0)[:, None]
     p = beam * true_range[:, None].astype(np.float64)
@@ -304,9 +383,15 @@ def decode(data: bytes, xyz: np.ndarray, sensor, where="truth file") -> np.ndarr
         bare = np.isnan(true_range)
         out["normal"][bare] = np.nan
         out["object_id"][bare] = -1
+    if what is not None:
+        out["object_class"] = what & ~np.uint8(MOVING_BIT)
+        out["moving"] = (what & MOVING_BIT) != 0
+        out["velocity"] = 0.0
+        out["velocity"][moved] = velocity_cm * VELOCITY_STEP_M_S
     return out
 
 
-__all__ = ["BLOCK_WEATHER", "HEADER_BYTES", "MAGIC", "NORMAL_BOUND_DEG", "SIDECAR_DTYPE", "TRUE_XYZ_ABS_BOUND_M",
-           "TRUE_XYZ_REL_BOUND", "WEATHER_DTYPE", "decode", "encode", "motion_knots", "object_id_bytes",
+__all__ = ["ACTOR_CLASSES", "BLOCK_ACTORS", "BLOCK_WEATHER", "FIRING_DTYPE", "HEADER_BYTES", "MAGIC",
+           "MOVING_SPEED_M_S", "NORMAL_BOUND_DEG", "SIDECAR_DTYPE", "TRUE_XYZ_ABS_BOUND_M", "TRUE_XYZ_REL_BOUND",
+           "VELOCITY_STEP_M_S", "WEATHER_DTYPE", "decode", "encode", "motion_knots", "object_id_bytes",
            "octahedral_decode", "octahedral_encode", "read_header", "rotate", "rotvec_of", "sidecar_dtype"]

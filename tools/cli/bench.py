@@ -27,8 +27,10 @@ def add_commands(sub) -> None:
     p.add_argument("--suite", default="regress",
                    help="regress (the regression suite: city, forest, highway), generalize (the held-out "
                    "families, evaluation seeds, simulated and real kinds), weather (generalize's simulated "
-                   "sequences in clear air, light and dense fog, rain and snow: docs/weather.md), or a sweep spec "
-                   "YAML (default regress)")
+                   "sequences in clear air, light and dense fog, rain and snow: docs/weather.md), traffic (its "
+                   "sequences of the families with traffic, each with moving traffic and as its static twin), "
+                   "stress (the named stress scenes of moving traffic and their static twins: docs/traffic.md), or "
+                   "a sweep spec YAML (default regress)")
     p.add_argument("--method", action="append", default=[], metavar="NAME",
                    help="a method to run (repeatable; default: bl, ncf, salo, default)")
     p.add_argument("--command", action="append", default=[], metavar="NAME=CMD",
@@ -39,7 +41,8 @@ def add_commands(sub) -> None:
                    help="per-point fields handed to the methods: of ring, time_s, azimuth_index, range_m, or none "
                    "(default ring,time_s; the generalize suite's real kind: none)")
     p.add_argument("--frames", type=whole_number(2), help="sweeps per sequence (default: the suite's)")
-    p.add_argument("--families", help="generalize, weather: only these families, comma-separated")
+    p.add_argument("--families", help="generalize, weather, traffic: only these families; stress: only these scenes; "
+                   "comma-separated")
     p.add_argument("--rerun", action="append", default=[], metavar="NAME",
                    help="redo this method's stored results (repeatable)")
     p.add_argument("--out", type=Path, help="output folder (default out/bench/<suite name>)")
@@ -57,7 +60,7 @@ def cmd_bench(args) -> int:
     import shlex
     import sys
 
-    from tools.leaderboard import SuiteError, run_bench
+    from tools.leaderboard import SUITES, SuiteError, run_bench
     from tools.methods import CommandMethod, MethodError, method_from_name
     from tools.staging import StagingError, parse_fields
 
@@ -81,8 +84,8 @@ def cmd_bench(args) -> int:
         if why:
             print(f"note: {m.label}: {why}; its runs will fail", file=sys.stderr)
     suite = args.suite
-    if suite not in ("regress", "generalize", "weather") and not Path(suite).is_file():
-        raise CommandError(f"--suite {suite!r}: regress, generalize, weather, or a sweep spec file")
+    if suite not in SUITES and not Path(suite).is_file():
+        raise CommandError(f"--suite {suite!r}: {', '.join(SUITES)}, or a sweep spec file")
     out = args.out or Path("out") / "bench" / Path(suite).stem
     families = tuple(f.strip() for f in args.families.split(",") if f.strip()) if args.families else ()
     try:

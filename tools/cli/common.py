@@ -136,7 +136,7 @@ def parse_config_set(pairs: list[str]) -> dict:
 def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> dict[str, Any]:
     """Scene parameter overrides from a YAML file, then ``key=value`` pairs (which win).
 
-    The YAML file holds a flat mapping ``parameter: value``. Values from pairs stay
+    The YAML file holds a mapping ``parameter: value`` (a section's keys as a mapping). Values from pairs stay
     strings (the scene's parameter types convert them). Errors (ValueError) name the file or pair.
     """
     out: dict[str, Any] = {}
@@ -150,7 +150,7 @@ def parse_overrides(pairs: list[str] | None, yaml_file: Path | None = None) -> d
         if not isinstance(data, dict) or not all(isinstance(k, str) for k in data):
             raise ValueError(f"{path}: expected a mapping of parameter names to values")
         for key, value in data.items():
-            if isinstance(value, (dict, list)):
+            if isinstance(value, list):  # (a mapping is a section's keys: traffic)
                 raise ValueError(f"{path}: parameter {key}: expected a single value")
             out[key] = value
     try:

@@ -97,7 +97,7 @@ def cmd_scenes(args) -> int:
             raise CommandError("--yaml needs a scene NAME")
         import yaml
 
-        defaults = {p.name: p.default for p in scenes.scene_parameters(args.name)}
+        defaults = _defaults(scenes.scene_parameters(args.name))
         _out(f"# salo scene parameters for {args.name!r}: edit and pass with --scene-params FILE")
         _out(yaml.safe_dump(defaults, sort_keys=False).rstrip())
         return 0
@@ -109,6 +109,14 @@ def cmd_scenes(args) -> int:
         _out("\n`salo scenes NAME` lists a scene's parameters; override them with --set KEY=VALUE "
              "or --scene-params FILE.yaml")
     return 0
+
+
+def _defaults(members) -> dict:
+    """{key: default} of declared parameters (lists as lists), a section's as a mapping of its own."""
+    from paramspec import Section
+
+    return {m.name: _defaults(m.members) if isinstance(m, Section) else (list(m.default) if isinstance(
+        m.default, tuple) else m.default) for m in members}
 
 
 def _scene_from_args(name: str, args):

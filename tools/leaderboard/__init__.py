@@ -187,6 +187,14 @@ def write_leaderboard(out: Path, suite: str, sequences: list[BenchSequence], met
                   (pages or {})]
         if linked:
             lines += ["3D views (scans, trajectories, error along the path): " + ", ".join(linked), ""]
+    if str(suite) in ("stress", "traffic"):  # moving traffic: each sequence's end error and motion standing still
+        from .standstill import motion_table
+
+        lines += ["## End error and motion while standing still", "",
+                  "Per sequence: the error of the last pose, m, and the summed translation of a method's poses "
+                  "between frames where the sensor truly stood still, m (- where it never did); each stress "
+                  "scene beside its static twin (the same ego motion, nothing else moving).", "",
+                  motion_table(results, methods, sequences), ""]
     failed = [r for r in results if r["status"] != "ok"]
     if failed:
         lines += ["## Failed runs", ""]

@@ -1,11 +1,14 @@
-"""The sequences a bench runs over: the regression suite, the generalisation suite, its weather suite, or a sweep spec.
+"""The sequences a bench runs over: the regression suite, the generalisation suite, its weather and traffic suites,
+the stress scenes, or a sweep spec.
 
 Each becomes a list of ``BenchSequence``: a simulated sequence folder under the
 bench's output folder (simulated once, reused by every later run), its scene
 family (the leaderboard's table groups by it), and the per-point fields its
 methods may see (the generalisation suite's "real" kind: none, as real KITTI).
 The weather suite's sequences are grouped by their weather condition (a table
-each: clear air, light fog, dense fog, rain, snow), the clear one the others' twin.
+each: clear air, light fog, dense fog, rain, snow), the clear one the others' twin; the
+traffic suite's by family, with traffic and static; the stress suite's by scene, moving
+and its static twin.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-SUITES = ("regress", "generalize", "weather")
+SUITES = ("regress", "generalize", "weather", "traffic", "stress")
 
 
 class SuiteError(ValueError):
@@ -49,15 +52,21 @@ def bench_sequences(suite: str | Path, out: str | Path, *, frames: int | None = 
 
     suite: "regress" (``tools.sweep.regress.SUITE``), "generalize" (the evaluation split of
     ``tools.family_suite``; ``frames`` and ``families`` narrow it), "weather" (its simulated
-    sequences in each weather condition, ``family_suite.weather_suite``; the same narrowing) or a
-    sweep spec YAML (its scenes x seeds x sensors x noise levels; its variants are not used).
+    sequences in each weather condition, ``family_suite.weather_suite``; the same narrowing), "traffic"
+    (its simulated sequences of the families with traffic, each with moving traffic and as its static
+    twin, ``family_suite.traffic_suite``; the same narrowing), "stress" (the named stress scenes and
+    their static twins, ``tools.stress_suite``; ``families`` names scenes) or a sweep spec YAML (its
+    scenes x seeds x sensors x noise levels; its variants are not used).
     on_sequence(id) before each simulation. Raises SuiteError.
     """
     out = Path(out)
-    if str(suite) in ("generalize", "weather"):
-        return _generalize(out, frames, families, on_sequence, weather=str(suite) == "weather")
+    if str(suite) in ("generalize", "weather", "traffic"):
+        return _generalize(out, frames, families, on_sequence, weather=str(suite) == "weather",
+                           traffic=str(suite) == "traffic")
+    if str(suite) == "stress":
+        return _stress(out, frames, families, on_sequence)
     if families:
-        raise SuiteError("--families narrows the generalize and weather suites only")
+        raise SuiteError("--families narrows the generalize, weather, traffic and stress suites only")
     return _sweep(suite, out, frames, on_sequence)
 
 
@@ -93,28 +102,59 @@ def _sweep(suite, out: Path, frames: int | None, on_sequence) -> list[BenchSeque
 
 
 def _generalize(out: Path, frames: int | None, families: tuple[str, ...], on_sequence,
-                weather: bool = False) -> list[BenchSequence]:
-    from tools.family_suite import DEFAULT_FRAMES, EVALUATION_SEEDS, simulate_to_folder, suite, weather_suite
+                weather: bool = False, traffic: bool = False) -> list[BenchSequence]:
+    from tools.family_suite import (
+        DEFAULT_FRAMES,
+        EVALUATION_SEEDS,
+        simulate_to_folder,
+        suite,
+        traffic_suite,
+        weather_suite,
+    )
 
     try:
-        seqs = weather_suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None) if weather \
-            else suite(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None)
+        chosen = (weather_suite if weather else traffic_suite if traffic else suite)
+        seqs = chosen(EVALUATION_SEEDS, frames or DEFAULT_FRAMES, tuple(families) or None)
     except ValueError as exc:
         raise SuiteError(str(exc)) from None
     sequences = []
     for seq in seqs:
-        path = out / "sequences" / seq.name
-        if not (path / "manifest.json").is_file():
-            if on_sequence is not None:
-                on_sequence(seq.name)
-            try:
-                simulate_to_folder(seq, path, force=True)
-            except ValueError as exc:
-                raise SuiteError(f"{seq.name}: {exc}") from None
+        path = _simulated_once(seq, out, simulate_to_folder, on_sequence)
         fields = None if seq.kind == "simulated" else ()
-        group = seq.weather if seq.weather is not None else f"{seq.family} ({seq.kind})"
+        group = seq.weather if seq.weather is not None else f"{seq.family} ({'traffic' if seq.traffic else 'static'})" \
+            if traffic else f"{seq.family} ({seq.kind})"
         sequences.append(BenchSequence(seq.name, group, path, fields))
     return sequences
+
+
+def _stress(out: Path, frames: int | None, scenes: tuple[str, ...], on_sequence) -> list[BenchSequence]:
+    """The stress scenes and their static twins, a table each (``tools.stress_suite``)."""
+    from tools.stress_suite import simulate_to_folder, stress_suite
+
+    try:
+        seqs = stress_suite(tuple(scenes), frames)
+    except ValueError as exc:
+        raise SuiteError(str(exc)) from None
+    sequences = []
+    for seq in seqs:
+        path = _simulated_once(seq, out, simulate_to_folder, on_sequence)
+        sequences.append(BenchSequence(seq.name, f"{seq.scene} ({'moving' if seq.moving else 'static twin'})",
+                                       path, None))
+    return sequences
+
+
+def _simulated_once(seq, out: Path, simulate_to_folder, on_sequence) -> Path:
+    """``OUT/sequences/<name>`` of a suite's sequence, simulated by ``simulate_to_folder(seq, path, force=True)``
+    unless a complete one is there (its manifest is written last); SuiteError naming it when it fails."""
+    path = out / "sequences" / seq.name
+    if not (path / "manifest.json").is_file():
+        if on_sequence is not None:
+            on_sequence(seq.name)
+        try:
+            simulate_to_folder(seq, path, force=True)
+        except ValueError as exc:
+            raise SuiteError(f"{seq.name}: {exc}") from None
+    return path
 
 
 __all__ = ["SUITES", "BenchSequence", "SuiteError", "bench_sequences"]

@@ -70,7 +70,7 @@ from importlib.metadata import PackageNotFoundError, version
 import numpy as np
 
 from simlidar import se3
-from simlidar.sequence import deskew_times
+from simlidar.sequence import deskew_times, method_frame
 from tools.runners import MethodRun
 
 log = logging.getLogger(__name__)
@@ -248,7 +248,7 @@ def run_frames(name: str, sequence, register: Register, config: dict, frames: sl
     timed, diverged_at = 0, None
     t0 = time.perf_counter()
     for i, k in enumerate(idx):
-        frame = sequence[int(k)]
+        frame = method_frame(sequence, int(k))
         pts = np.asarray(frame.points, dtype=np.float64)
         keep = np.all(np.isfinite(pts), axis=1)
         times = scan_times(sequence, frame)
