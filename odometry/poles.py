@@ -94,13 +94,15 @@ ALIAS_VOTE_RATIO = 0.75
 class Poles:
     """A scan's poles. points: (P, 3) run centroids, sensor frame, m; counts: (P,) returns in each run;
     times_s: (P,) their mean firing time, s, or None (the scan has no per-point times); cluttered: the
-    scan's crowded one-return poles were many (``CLUTTERED_PER_BEAM``), and ``crowded`` poles were dropped."""
+    scan's crowded one-return poles per beam fired, ``clutter_per_beam``, were more than
+    ``CLUTTERED_PER_BEAM``, and ``crowded`` poles were dropped (both measured with the clutter filter only)."""
 
     points: np.ndarray
     counts: np.ndarray
     times_s: np.ndarray | None = None
     cluttered: bool = False
     crowded: int = 0
+    clutter_per_beam: float = 0.0
 
     def __len__(self) -> int:
         return len(self.points)
@@ -122,14 +124,15 @@ def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns
     centroids, counts, mean_times = foreground_runs(
         image, points, times, 2.0 * math.pi / n_columns, float(max_width_m), MIN_GAP_M, GAP_FRACTION,
         RUN_TOLERANCE_M, RUN_TOLERANCE_FRACTION, MAX_COLUMN_GAP)
-    cluttered, dropped = False, 0
+    cluttered, dropped, per_beam = False, 0, 0.0
     if clutter_filter and len(centroids):
         among = crowded(centroids, n_columns)
-        cluttered = bool(np.count_nonzero(among & (counts == 1)) > CLUTTERED_PER_BEAM * n_rings * n_columns)
+        per_beam = np.count_nonzero(among & (counts == 1)) / (n_rings * n_columns)
+        cluttered = per_beam > CLUTTERED_PER_BEAM
         if cluttered:
             dropped = int(among.sum())
             centroids, counts, mean_times = centroids[~among], counts[~among], mean_times[~among]
-    return Poles(centroids, counts, None if times_s is None else mean_times, cluttered, dropped)
+    return Poles(centroids, counts, None if times_s is None else mean_times, cluttered, dropped, per_beam)
 
 
 def crowded(points: np.ndarray, n_columns: int, radius_m: float = ISOLATION_RADIUS_M,

@@ -8,11 +8,13 @@ every pole by the truth of its nearest return (a weather return or a surface's).
 scans' poles, placed by the true poses, through the pole map (``odometry.poles.PoleMap``) to count
 what the map's target holds once the confirmation by a neighbouring frame is asked for.
 
-    python -m tools.pole_clutter --seeds 101 --frames 3 --out OUT
+    python -m tools.pole_clutter --seeds 101 --frames 3 --out OUT [--real FOLDER=SENSOR ...]
 
-prints a table per condition (scans the filter found cluttered; poles per scan: of structure, of
-weather, and the shares the filter keeps; the target's poles after confirmation) and writes
-``OUT/pole_clutter.csv`` (a row per sequence and condition).
+prints a table per condition (scans the filter found cluttered, and the range over the scans of the
+statistic that decides it: crowded one-return poles per 1000 beams fired; poles per scan: of
+structure, of weather, and the shares the filter keeps; the target's poles after confirmation) and
+writes ``OUT/pole_clutter.csv`` (a row per sequence and condition). ``--real`` adds real scans (no
+truth: clear air as far as anyone knows) to check that the gate leaves a real street alone.
 """
 
 from __future__ import annotations
@@ -58,9 +60,15 @@ class Counts:
     confirmed_weather: int = 0
 
 
+def per_1000_beams(rates: list[float]) -> str:
+    """min / median / max of the scans' crowded one-return poles per beam, per 1000 beams."""
+    r = 1000.0 * np.asarray(rates)
+    return f"{r.min():.2f} / {np.median(r):.2f} / {r.max():.2f}" if len(r) else "-"
+
+
 def labelled_poles(frame, sensor, config):
     """A frame's poles as the odometry's preparation finds them: (P, 3) sensor frame, m; (P,) bool, True where
-    the nearest clean return is a weather return in the truth; whether the scan was cluttered."""
+    the nearest clean return is a weather return in the truth; the ``odometry.poles.Poles`` themselves."""
     prepared = prepare_scan(frame.points, frame.time_s, frame.ring, config, sensor, with_normals=False,
                             with_poles=True)
     poles = prepared.scan.poles
@@ -69,10 +77,10 @@ def labelled_poles(frame, sensor, config):
     weather = frame.field("weather")  # absent in clear air: every return is a surface's
     weather = np.zeros(len(frame.points)) if weather is None else weather
     if len(poles) == 0:
-        return poles.points.reshape(0, 3), np.zeros(0, dtype=bool), poles.cluttered
+        return poles.points.reshape(0, 3), np.zeros(0, dtype=bool), poles
     clean_weather = np.asarray(weather)[prepared.clean.kept_rows] > 0
     _, nearest = KDTree(prepared.clean.points).query(poles.points)
-    return poles.points, clean_weather[nearest], poles.cluttered
+    return poles.points, clean_weather[nearest], poles
 
 
 def _map_counts(poles_world: list[np.ndarray], labels: list[np.ndarray], cluttered: list[bool] | None
@@ -91,8 +99,9 @@ def _map_counts(poles_world: list[np.ndarray], labels: list[np.ndarray], clutter
     return len(target.points) - weather, weather
 
 
-def count_sequence(spec, frames: int) -> Counts:
-    """Counts over ``frames`` consecutive scans of a weather-suite sequence ``spec``."""
+def count_sequence(spec, frames: int) -> tuple[Counts, list[float]]:
+    """Counts over ``frames`` consecutive scans of a weather-suite sequence ``spec``, and each scan's crowded
+    one-return poles per beam (``Poles.clutter_per_beam``)."""
     world, trajectory, sensor, start_s = suite_world(spec)
     seq = simulate_in_memory(world, trajectory, sensor, frames, seed=spec.seed, t_start=start_s + OFFSET_S,
                              fields="truth")
@@ -100,7 +109,7 @@ def count_sequence(spec, frames: int) -> Counts:
     off = replace(on, poles=replace(on.poles, clutter_filter=False))
     on = replace(on, poles=replace(on.poles, clutter_filter=True))
     c = Counts(scans=len(seq))
-    every, every_labels, isolated, isolated_labels, cluttered = [], [], [], [], []
+    every, every_labels, isolated, isolated_labels, cluttered, rates = [], [], [], [], [], []
     for k in range(len(seq)):
         frame = seq[k]
         points, weather, _ = labelled_poles(frame, sensor, off)
@@ -108,7 +117,9 @@ def count_sequence(spec, frames: int) -> Counts:
         c.weather += int(weather.sum())
         every.append(se3.transform_points(seq.poses[k], points))
         every_labels.append(weather)
-        points, weather, is_cluttered = labelled_poles(frame, sensor, on)
+        points, weather, poles = labelled_poles(frame, sensor, on)
+        is_cluttered = poles.cluttered
+        rates.append(poles.clutter_per_beam)
         c.cluttered += int(is_cluttered)
         c.isolated_structure += int((~weather).sum())
         c.isolated_weather += int(weather.sum())
@@ -117,7 +128,22 @@ def count_sequence(spec, frames: int) -> Counts:
         cluttered.append(is_cluttered)
     c.target_structure, c.target_weather = _map_counts(every, every_labels, None)
     c.confirmed_structure, c.confirmed_weather = _map_counts(isolated, isolated_labels, cluttered)
-    return c
+    return c, rates
+
+
+def real_rates(folder: Path, sensor_name: str) -> tuple[int, list[float]]:
+    """(scans cluttered, each scan's crowded one-return poles per beam) of a real sequence folder, read as the
+    odometry reads it (no per-point times) with the default configuration."""
+    from simlidar.dataset import open_sequence
+    from simlidar.sensor import load_preset
+
+    seq, sensor, config = open_sequence(folder, sensor=sensor_name), load_preset(sensor_name), variant(DEFAULT_VARIANT)
+    cluttered, rates = 0, []
+    for k in range(len(seq)):
+        poles = prepare_scan(seq[k].points, None, None, config, sensor, with_normals=False, with_poles=True).scan.poles
+        cluttered += int(poles.cluttered)
+        rates.append(poles.clutter_per_beam)
+    return cluttered, rates
 
 
 def _share(part: int, whole: int) -> str:
@@ -132,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma-separated weather conditions (clear included: the twins)")
     ap.add_argument("--frames", type=int, default=3, help="consecutive scans per sequence (the pole map's frames)")
     ap.add_argument("--out", type=Path, required=True, help="folder for pole_clutter.csv")
+    ap.add_argument("--real", action="append", default=[], metavar="FOLDER=SENSOR",
+                    help="a real sequence folder and its sensor preset (repeatable): its scans' gate statistic")
     args = ap.parse_args(argv)
     if args.frames < 1:
         ap.error("--frames must be at least 1")
@@ -141,13 +169,21 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"pole_clutter: {exc}", file=sys.stderr)
         return 2
-    rows, totals = [], {}
+    real = []
+    for item in args.real:
+        folder, _, sensor_name = item.partition("=")
+        if not sensor_name or not Path(folder).is_dir():
+            ap.error(f"--real {item}: expected FOLDER=SENSOR with an existing folder")
+        real.append((Path(folder), sensor_name))
+    rows, totals, rates = [], {}, {}
     for i, spec in enumerate(specs, 1):
         print(f"[{i}/{len(specs)}] {spec.family} seed {spec.seed} {spec.sensor} {spec.weather}", file=sys.stderr,
               flush=True)
-        c = count_sequence(spec, args.frames)
+        c, scan_rates = count_sequence(spec, args.frames)
+        rates.setdefault(spec.weather, []).extend(scan_rates)
         rows.append({"family": spec.family, "seed": spec.seed, "sensor": spec.sensor, "condition": spec.weather,
-                     **vars(c)})
+                     **vars(c), "per_1000_beams_max": round(1000.0 * max(scan_rates), 3),
+                     "per_1000_beams_min": round(1000.0 * min(scan_rates), 3)})
         t = totals.setdefault(spec.weather, Counts())
         for key, value in vars(c).items():
             setattr(t, key, getattr(t, key) + value)
@@ -157,16 +193,21 @@ def main(argv: list[str] | None = None) -> int:
     writer.writeheader()
     writer.writerows(rows)
     atomic_write_text(args.out / "pole_clutter.csv", text.getvalue())
-    print("| condition | scans | cluttered | structure poles / scan | kept | weather poles / scan | kept "
-          "| map target, weather (no filter) | map target, weather (filter) | structure in it |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| condition | scans | cluttered | gate: per 1000 beams, min / median / max | structure poles / scan "
+          "| kept | weather poles / scan | kept | map target, weather (no filter) | map target, weather (filter) "
+          "| structure in it |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for cond, t in totals.items():
-        print(f"| {cond} | {t.scans} | {t.cluttered} | {t.structure / t.scans:.1f} "
+        print(f"| {cond} | {t.scans} | {t.cluttered} | {per_1000_beams(rates[cond])} | {t.structure / t.scans:.1f} "
               f"| {_share(t.isolated_structure, t.structure)} "
               f"| {t.weather / t.scans:.1f} | {_share(t.isolated_weather, t.weather)} "
               f"| {_share(t.target_weather, t.target_weather + t.target_structure)} "
               f"| {_share(t.confirmed_weather, t.confirmed_weather + t.confirmed_structure)} "
               f"| {_share(t.confirmed_structure, t.target_structure)} |")
+    for folder, sensor_name in real:
+        cluttered, scan_rates = real_rates(folder, sensor_name)
+        print(f"| real: {folder.name} ({sensor_name}) | {len(scan_rates)} | {cluttered} | {per_1000_beams(scan_rates)} "
+              "| | | | | | | |")
     print(f"rows: {args.out / 'pole_clutter.csv'}")
     return 0
 
