@@ -29,6 +29,11 @@ def test_the_report_counts_weather_poles_by_the_truth_and_the_clear_twin_has_non
     # the map's target without the filter is mostly weather; with it, mostly structure
     assert fog["target_weather"] > fog["target_structure"]
     assert fog["confirmed_weather"] < fog["confirmed_structure"]
+    # the stages before the poles, labelled by the truth: none in clear air; in fog the ICP's filters keep
+    # less of the weather than the clean returns hold (clutter has no plane)
+    assert clear["clean_weather"] == clear["icp_weather"] == clear["mapped_weather"] == 0
+    assert fog["clean_weather"] > 0 and fog["icp"] > 0
+    assert fog["icp_weather"] / fog["icp"] < fog["clean_weather"] / fog["clean"]
     assert "| dense-fog |" in capsys.readouterr().out
 
 

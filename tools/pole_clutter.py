@@ -1,4 +1,5 @@
-"""What the poles stage keeps of the weather, against the truth: structure poles and weather "poles".
+"""What the poles stage keeps of the weather, against the truth: structure poles and weather "poles"; and the
+weather's share of the points at the stages before it (the clean returns, the ICP's points, the map's).
 
 Fog's backscatter, raindrops and snowflakes return from a random range on a beam, and near the
 sensor each such return stands clear of its background: a pole by the pole rule. This tool runs
@@ -58,6 +59,14 @@ class Counts:
     target_weather: int = 0
     confirmed_structure: int = 0
     confirmed_weather: int = 0
+    # the scans' points at the stages before the poles (the default with the filter): the clean returns, the
+    # ICP's points (voxel centroids past the NCF and curvature filters) and the voxel centroids the map takes
+    clean: int = 0
+    clean_weather: int = 0
+    icp: int = 0
+    icp_weather: int = 0
+    mapped: int = 0
+    mapped_weather: int = 0
 
 
 def per_1000_beams(rates: list[float]) -> str:
@@ -66,20 +75,29 @@ def per_1000_beams(rates: list[float]) -> str:
     return f"{r.min():.2f} / {np.median(r):.2f} / {r.max():.2f}" if len(r) else "-"
 
 
-def labelled_poles(frame, sensor, config):
+def labelled_poles(frame, sensor, config, counts: Counts | None = None):
     """A frame's poles as the odometry's preparation finds them: (P, 3) sensor frame, m; (P,) bool, True where
-    the nearest clean return is a weather return in the truth; the ``odometry.poles.Poles`` themselves."""
-    prepared = prepare_scan(frame.points, frame.time_s, frame.ring, config, sensor, with_normals=False,
+    the nearest clean return is a weather return in the truth; the ``odometry.poles.Poles`` themselves.
+    counts: add the frame's points at the stages before the poles to these (the normals then estimated)."""
+    prepared = prepare_scan(frame.points, frame.time_s, frame.ring, config, sensor, with_normals=counts is not None,
                             with_poles=True)
     poles = prepared.scan.poles
     if frame.field("true_range_m") is None:
         raise ValueError("the frame has no per-return truth: simulate with fields='truth'")
     weather = frame.field("weather")  # absent in clear air: every return is a surface's
     weather = np.zeros(len(frame.points)) if weather is None else weather
+    clean_weather = np.asarray(weather)[prepared.clean.kept_rows] > 0
+    tree = KDTree(prepared.clean.points)
+    if counts is not None:  # (a voxel centroid is labelled by its nearest clean return)
+        counts.clean += len(clean_weather)
+        counts.clean_weather += int(clean_weather.sum())
+        for name, points in (("icp", prepared.scan.points), ("mapped", prepared.scan.centroids)):
+            labels = clean_weather[tree.query(points)[1]] if len(points) else np.zeros(0, dtype=bool)
+            setattr(counts, name, getattr(counts, name) + len(labels))
+            setattr(counts, f"{name}_weather", getattr(counts, f"{name}_weather") + int(labels.sum()))
     if len(poles) == 0:
         return poles.points.reshape(0, 3), np.zeros(0, dtype=bool), poles
-    clean_weather = np.asarray(weather)[prepared.clean.kept_rows] > 0
-    _, nearest = KDTree(prepared.clean.points).query(poles.points)
+    _, nearest = tree.query(poles.points)
     return poles.points, clean_weather[nearest], poles
 
 
@@ -117,7 +135,7 @@ def count_sequence(spec, frames: int) -> tuple[Counts, list[float]]:
         c.weather += int(weather.sum())
         every.append(se3.transform_points(seq.poses[k], points))
         every_labels.append(weather)
-        points, weather, poles = labelled_poles(frame, sensor, on)
+        points, weather, poles = labelled_poles(frame, sensor, on, counts=c)
         is_cluttered = poles.cluttered
         rates.append(poles.clutter_per_beam)
         c.cluttered += int(is_cluttered)
@@ -208,6 +226,13 @@ def main(argv: list[str] | None = None) -> int:
         cluttered, scan_rates = real_rates(folder, sensor_name)
         print(f"| real: {folder.name} ({sensor_name}) | {len(scan_rates)} | {cluttered} | {per_1000_beams(scan_rates)} "
               "| | | | | | | |")
+    print("\nThe weather's share of a scan's points at the stages before the poles (the default's preparation):\n")
+    print("| condition | clean returns / scan | weather in them | ICP points / scan | weather in them "
+          "| the map's points / scan | weather in them |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for cond, t in totals.items():
+        print(f"| {cond} | {t.clean / t.scans:.0f} | {_share(t.clean_weather, t.clean)} | {t.icp / t.scans:.0f} "
+              f"| {_share(t.icp_weather, t.icp)} | {t.mapped / t.scans:.0f} | {_share(t.mapped_weather, t.mapped)} |")
     print(f"rows: {args.out / 'pole_clutter.csv'}")
     return 0
 
