@@ -138,3 +138,25 @@ def test_a_tiny_suite_runs_and_summarises(tmp_path):
     all_rows = [r for r in rows if r["family"] == "all"]
     assert {(r["kind"], r["method"]) for r in all_rows} == {(k, m) for k in KINDS for m in ("bl", "bl-map")}
     assert all(r["ran"] == 2 and r["sequences"] == 2 for r in all_rows)
+
+
+def test_each_weather_is_read_against_its_clear_twin():
+    """``twin_ratios`` pairs each sequence in a weather with the same sequence in clear air, per method."""
+    from tools.experiments.generalize import twin_ratios, twin_table_markdown
+
+    def result(family, weather, t_err, failed=False):
+        seq = {"family": family, "seed": 1, "sensor": "vlp16", "kind": "real", "weather": weather}
+        return {"sequence": seq, "methods": {"a": {"ok": True, "t_err_pct": t_err, "failed": failed},
+                                             "b": {"ok": False, "note": "not installed"}}}
+
+    results = [result("city", "clear", 0.10), result("city", "snow", 0.12), result("tunnel", "clear", 1.0),
+               result("tunnel", "snow", 20.0, failed=True), result("city", "rain", 0.30)]
+    rows = {(r["weather"], r["method"]): r for r in twin_ratios(results, ("a", "b"))}
+    snow, rain = rows[("snow", "a")], rows[("rain", "a")]
+    assert (snow["pairs"], snow["failures"], snow["over_bound"]) == (2, 1, 1)
+    assert snow["ratio_median"] == pytest.approx((1.2 + 20.0) / 2) and snow["ratio_max"] == pytest.approx(20.0)
+    assert rain["ratio_max"] == pytest.approx(3.0) and rain["over_bound"] == 1
+    assert rows[("snow", "b")]["ran"] == 0
+    table = twin_table_markdown(list(rows.values()), ("a", "b"))
+    assert "1/2 failed" in table and "n/a" in table
+    assert twin_ratios([result("city", None, 0.1)], ("a",)) == []  # no weather: no table

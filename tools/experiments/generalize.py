@@ -227,6 +227,59 @@ def summarize(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
     return rows
 
 
+# The bound a weather's t_err is held to against its clear twin's (issue "Weather": light fog and rain).
+TWIN_RATIO_BOUND = 1.5
+
+
+def twin_ratios(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
+    """Per (weather condition, method): each sequence's t_err against its clear twin's (the same sequence,
+    weather "clear"): the median and largest ratio over the sequences, how many exceed ``TWIN_RATIO_BOUND``,
+    and the failures in the weather. Empty without a clear twin."""
+    def twin_key(seq: dict) -> tuple:
+        return tuple(sorted((k, str(v)) for k, v in seq.items() if k != "weather"))
+
+    clear = {twin_key(r["sequence"]): r for r in results if r["sequence"].get("weather") == "clear"}
+    rows = []
+    conditions = dict.fromkeys(r["sequence"]["weather"] for r in results
+                               if r["sequence"].get("weather") not in (None, "clear"))
+    for cond in conditions:
+        pairs = [(r, clear.get(twin_key(r["sequence"]))) for r in results if r["sequence"].get("weather") == cond]
+        for m in methods:
+            ratios, failures, ran = [], 0, 0
+            for r, twin in pairs:
+                x, y = r["methods"].get(m, {}), (twin or {}).get("methods", {}).get(m, {})
+                if not x.get("ok"):
+                    continue
+                ran += 1
+                failures += bool(x.get("failed"))
+                a, b = x.get("t_err_pct"), y.get("t_err_pct") if y.get("ok") else None
+                if a is not None and b is not None and math.isfinite(a) and math.isfinite(b) and b > 0:
+                    ratios.append(a / b)
+            rows.append({"weather": cond, "method": m, "ran": ran, "failures": failures, "pairs": len(ratios),
+                         "ratio_median": float(np.median(ratios)) if ratios else float("nan"),
+                         "ratio_max": float(max(ratios)) if ratios else float("nan"),
+                         "over_bound": sum(v > TWIN_RATIO_BOUND for v in ratios)})
+    return rows
+
+
+def twin_table_markdown(rows: list[dict], methods: tuple[str, ...]) -> str:
+    """Rows per weather condition, a column per method: median / largest ratio to the clear twin's t_err,
+    (sequences over the bound), failures."""
+    by = {(r["weather"], r["method"]): r for r in rows}
+    out = []
+    for cond in dict.fromkeys(r["weather"] for r in rows):
+        cells = []
+        for m in methods:
+            r = by[(cond, m)]
+            cell = (f"{fmt(r['ratio_median'], '.2f')} / {fmt(r['ratio_max'], '.2f')} "
+                    f"({r['over_bound']}/{r['pairs']} over {TWIN_RATIO_BOUND:g}x)") if r["pairs"] else "n/a"
+            if r["failures"]:
+                cell += f", {r['failures']}/{r['ran']} failed"
+            cells.append(cell)
+        out.append([cond, *cells])
+    return markdown_table(["weather", *(method_label(m) for m in methods)], out)
+
+
 def method_label(m: str) -> str:
     from tools.methods import method_label as label
 
@@ -284,6 +337,7 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
               + [f"{f}_{s}" for f in FIGURES for s in ("mean", "std")])
     write_json(record.path("results.json"), {
         "experiment": "generalize", "params": params.to_dict(), "summary": rows,
+        "weather_against_clear": twin_ratios(results, methods),
         "sequences": [{k: v for k, v in r.items() if k != "gt"} | {"methods": {
             m: {k: v for k, v in x.items() if k != "poses"} for m, x in r["methods"].items()}} for r in results],
     })
@@ -307,6 +361,12 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
                                 ("vertical_drift_pct", "vertical drift |dz| / distance, %", ".2f"),
                                 ("frames_per_second", "frames / s", ".1f")):
         lines += [f"## {title}", "", table_markdown(rows, methods, figure, spec), ""]
+    twins = twin_ratios(results, methods)
+    if twins:
+        lines += ["## Each weather against its clear twin", "",
+                  "Per sequence, t_err in the weather / t_err of the same sequence in clear air: median / largest "
+                  f"over the sequences (how many above {TWIN_RATIO_BOUND:g}x), and failures in the weather.", "",
+                  twin_table_markdown(twins, methods), ""]
     for r in errors:
         lines.append(f"- {r['name']}: not simulated ({r['error']})")
     unavailable = {m: x["note"] for r in results for m, x in r["methods"].items() if not x.get("ok")}
