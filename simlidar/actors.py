@@ -36,7 +36,7 @@ import numpy as np
 
 from .formats.tracks import TRACK_DTYPE
 from .formats.truth import ACTOR_CLASSES, MOVING_SPEED_M_S
-from .kernels.actors import merge_rows, nearest_actor_hits, ray_windows, rays_in_actor_frame
+from .kernels.actors import merge_rows, nearest_actor_hits, ray_windows, rays_by_block, rays_in_actor_frame
 from .raycast import CompactHits, Raycaster
 from .world import DEFAULT_REFLECTANCE, LABEL_REFLECTANCE
 
@@ -46,6 +46,7 @@ BOX_MARGIN_M = 0.05  # a candidate ray must cross the actor's box grown by this
 CULL_STEP_S = 0.25  # the table of every actor's position that culls those out of reach
 CULL_CHUNK_S = 20.0  # the table is filled this many seconds at a time
 ANGLE_MARGIN_RAD = 2e-3  # added to every window (rounding, a ray's spread within a column)
+_NO_RAYS, _NO_DISTANCES = np.zeros(0, np.int64), np.zeros(0)
 
 
 class ActorError(ValueError):
@@ -280,6 +281,8 @@ class SweepActors:
         half = aset.box_size[idx] / 2 + BOX_MARGIN_M
         self.box_lo = np.ascontiguousarray(aset.box_centre[idx] - half)
         self.box_hi = np.ascontiguousarray(aset.box_centre[idx] + half)
+        # a ray in an actor's frame, shifted by this, is in the frame of the BVH of every model (``ActorSet._fleet``)
+        self.shift = aset.model_shift[aset.model_of[idx]] - aset.fleet.offset
         self.candidates = self._windows(T_cols)
 
     # ------------------------------------------------------------ which rays may meet an actor
@@ -310,44 +313,42 @@ class SweepActors:
                                    np.ascontiguousarray(half_height), float(spread), az_extra,
                                    s.column_azimuth_rad(np.arange(C)), np.ascontiguousarray(s.elevation_rad),
                                    float(s.max_range_m))
+        self._candidate_rays, self._candidate_counts = rays, counts
         return np.split(rays, np.cumsum(counts)[:-1])
 
     # ------------------------------------------------------------ casting
     def cast(self, rows: np.ndarray, j: np.ndarray, origin: np.ndarray, offset: np.ndarray, direction: np.ndarray,
-             t_rows: np.ndarray, max_distance: float) -> ActorHits | None:
-        """The nearest actor hit of each of a call's rays.
+             t_rows: np.ndarray, max_distance: float, nearer: CompactHits | None = None) -> ActorHits | None:
+        """The nearest actor hit of each of a call's rays that could be the ray's nearest hit.
 
         rows (n,), j (n,): the rows of the call's rays that may meet an actor, and which (of this sweep's);
         origin + offset (3,), direction: (B, 3) the call's rays in the world; t_rows (n,): each row's time, s.
+        nearer: the hits the rays have already (the static world's), or None: a ray is not cast against an
+        actor whose box it enters only beyond its hit (``merge_hits`` would keep that hit, the nearer).
         """
         if len(rows) == 0:
             return None
+        nearer_ray, nearer_distance = (_NO_RAYS, _NO_DISTANCES) if nearer is None else (nearer.ray, nearer.distance)
         keep, o_a, d_a, R, p = rays_in_actor_frame(rows, j, t_rows, origin, offset, direction, self.T, self.vdt,
                                                    self.turn, self.t0, 0.0 if self.frozen else self.dt, self.box_lo,
-                                                   self.box_hi, float(max_distance))
+                                                   self.box_hi, float(max_distance), nearer_ray, nearer_distance,
+                                                   self.shift)
         if len(keep) == 0:
             return None
-        rows, j, t_rows = rows[keep], j[keep], t_rows[keep]
         fleet = self.aset.fleet
-        o_a += self.aset.model_shift[self.aset.model_of[self.idx[j]]] - fleet.offset
         h = fleet.cast_compact(o_a, d_a, max_distance)
         if len(h.ray) == 0:
             return None
         ray, dist, cos, normal, who, velocity = nearest_actor_hits(
-            len(origin), rows, h.ray, h.distance, h.cos_incidence, np.take(fleet._face_normal, h.face, axis=0),
-            R, p, j, t_rows, origin, offset, direction, self.v, self.w, self.t0, 0.0 if self.frozen else self.dt)
-        return ActorHits(ray, dist, cos, normal, self.idx[who], velocity)
+            len(origin), rows, keep, h.ray, h.distance, h.cos_incidence, h.face, fleet._face_normal, R, p, j, t_rows,
+            self.idx, origin, offset, direction, self.v, self.w, self.t0, 0.0 if self.frozen else self.dt)
+        return ActorHits(ray, dist, cos, normal, who, velocity)
 
     def split(self, bounds: np.ndarray) -> None:
         """Cut the candidate rays at the sweep's block bounds (global firing indices, ascending): per block, its
-        rows that may meet an actor and which (``block_rows``)."""
-        cands = np.concatenate(self.candidates)
-        j = np.repeat(np.arange(len(self.candidates)), [len(c) for c in self.candidates])
-        block = np.searchsorted(bounds, cands, side="right") - 1
-        order = np.argsort(block, kind="stable")  # by block, then actor, then ray
-        cands, j, block = cands[order], j[order], block[order]
-        cuts = np.searchsorted(block, np.arange(len(bounds)))
-        self._blocks = {int(bounds[k]): (cands[cuts[k]:cuts[k + 1]] - bounds[k], j[cuts[k]:cuts[k + 1]])
+        rows that may meet an actor and which (``block_rows``; ``kernels.actors.rays_by_block``)."""
+        rows, j, starts = rays_by_block(self._candidate_rays, self._candidate_counts, np.asarray(bounds, np.int64))
+        self._blocks = {int(bounds[k]): (rows[starts[k]:starts[k + 1]], j[starts[k]:starts[k + 1]])
                         for k in range(len(bounds) - 1)}
 
     def block_rows(self, a: int) -> tuple[np.ndarray, np.ndarray]:

@@ -50,6 +50,7 @@ if any (true range, point, normal, object); without one, NaN and object -1.
 from __future__ import annotations
 
 import sys
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,7 +60,7 @@ from .actors import ActorSet, merge_hits
 from .formats.tracks import TRACK_DTYPE
 from .formats.truth import MOVING_SPEED_M_S, SIDECAR_DTYPE, sidecar_dtype
 from .inside import InsideProbe, SensorInsideGeometry, probe
-from .kernels.sweep import block_rays, fill_rows, measure_block
+from .kernels.sweep import block_rays, fill_actor_rows, fill_rows, measure_block
 from .raycast import CompactHits, Raycaster
 from .sensor import LidarModel
 from .trajectory import Trajectory
@@ -320,16 +321,29 @@ class SweepSimulator:
         blocks = [(k, cols[k] * s.rings, cols[k + 1] * s.rings) for k in range(N_BLOCKS)]
         if acts is not None:
             acts.split(cols * s.rings)
-        cast = self.raycaster.map(lambda blk: self._cast_block(*blk, T_ref, T_fire, frame_index, t0, acts), blocks)
-        # Fill preallocated outputs block by block (no concatenation pass).
-        sizes = [len(c.measured) for c in cast]
-        offsets = np.concatenate([[0], np.cumsum(sizes)])
+        # Each block is cast, then written into the scan's rows as soon as the blocks before it have counted
+        # theirs: its rays and hits are still in the cache (a second pass over the whole sweep found them gone).
+        # A ray gives at most one return, so block k's rows start at or before its first ray, a: they fit.
+        room = self._memory.arrays(self._memory.capacity)
+        rows = Scan(**room, motion=motion)
+        offsets = np.zeros(N_BLOCKS + 1, np.int64)
+        counted = [threading.Event() for _ in range(N_BLOCKS)]
+
+        def cast_and_fill(blk) -> None:
+            k = blk[0]
+            c = None
+            try:
+                c = self._cast_block(*blk, T_ref, T_fire, frame_index, t0, acts)
+            finally:  # (the next block waits for this one's count, even when it failed)
+                if k > 0:
+                    counted[k - 1].wait()
+                offsets[k + 1] = offsets[k] + (len(c.measured) if c is not None else 0)
+                counted[k].set()
+            self._fill_block(c, rows, int(offsets[k]), T_ref)
+
+        self.raycaster.map(cast_and_fill, blocks)
         n = int(offsets[-1])
-        out = Scan(**self._memory.arrays(n), motion=motion)
-        if self.actors is not None:
-            out.object_class[:], out.moving[:], out.velocity[:] = 0, False, 0.0
-        jobs = list(zip(cast, offsets[:-1], strict=True))
-        self.raycaster.map(lambda job: self._fill_block(job[0], out, job[1], T_ref), jobs)
+        out = Scan(**{k: a[:n] for k, a in room.items()}, motion=motion)
         if self.actors is not None:
             out.tracks = acts.tracks(out.object_id) if acts is not None else np.zeros(0, TRACK_DTYPE)
         return out
@@ -360,7 +374,8 @@ class SweepSimulator:
         hits = rc.cast_compact(o_bvh, d_bvh, s.max_range_m + 1.0, o32, d32)
         if acts is not None:  # the nearest of the static hit and the moving objects' at each ray's instant
             rows, which = acts.block_rows(a)
-            found = acts.cast(rows, which, o_bvh, rc.offset, d_bvh, t0 + self.ray_time_s[a + rows], s.max_range_m + 1.0)
+            found = acts.cast(rows, which, o_bvh, rc.offset, d_bvh, t0 + self.ray_time_s[a + rows], s.max_range_m + 1.0,
+                              nearer=hits)
             hits = merge_hits(hits, found)
         if self._weather is not None:
             return self._cast_weather(k, a, b, hits, rng, frame_index, dir_local, o_bvh, d_bvh, t0, acts)
@@ -509,13 +524,11 @@ class SweepSimulator:
                   self.actors.first_object_id if self.actors is not None else 0,
                   out.xyz, out.intensity, out.ring, out.azimuth_index, out.time_s, out.range_m, out.true_range_m,
                   out.true_xyz, out.normal, out.object_id)
-        if moving:  # the moving objects' truth: class, motion, velocity along the reference frame's axes
-            on = np.flatnonzero(hits.actor >= 0)
-            rows = off + on
-            out.object_class[rows] = self.actors.class_code[hits.actor[on]]
-            velocity = hits.actor_velocity @ R_ref
-            out.velocity[rows] = velocity
-            out.moving[rows] = np.linalg.norm(velocity, axis=1) > MOVING_SPEED_M_S
+        if self.actors is not None:  # the moving objects' truth: class, motion, velocity in the reference frame
+            velocity = hits.actor_velocity @ R_ref if moving else _NO_ROWS
+            fill_actor_rows(off, len(hits.ray), hits.actor if moving else _NO_INDEX, self.actors.class_code, velocity,
+                            np.linalg.norm(velocity, axis=1) > MOVING_SPEED_M_S, out.object_class, out.moving,
+                            out.velocity)
         if c.kind is not None:
             self._fill_weather(c, out, sl)
             out.object_id[sl][_bare(hits)] = -1

@@ -198,6 +198,41 @@ def test_the_culled_cast_meets_every_actor_a_brute_force_cast_meets():
         assert np.allclose(scan.true_range_m[on_actor], best[ray[on_actor]], atol=2e-6)
 
 
+def test_rays_that_meet_the_world_before_an_actors_box_are_not_cast_against_it(monkeypatch):
+    """Boxes driving behind a wall: where the wall hides them the rays are not cast against them (no actor hit
+    comes back there), and the scan is the one casting every candidate ray against them gives."""
+    from simlidar.actors import SweepActors
+
+    wall = trimesh.creation.box((1.0, 12.0, 6.0))
+    wall.apply_translation((15.0, 0.0, 0.0))
+    ground = trimesh.creation.box((600.0, 600.0, 1.0))
+    ground.apply_translation((0.0, 0.0, -30.0))
+    both = trimesh.util.concatenate([ground, wall])
+    actors = [translating_box(x, y, v) for x, y, v in ((25.0, -20.0, 8.0), (30.0, 5.0, -6.0), (40.0, 12.0, 10.0))]
+    world = World(both.vertices, both.faces, np.r_[np.zeros(len(ground.faces), np.int32),
+                                                   np.ones(len(wall.faces), np.int32)], ["ground", "wall"], "test",
+                  actors=actors)
+    sensor = flat_sensor(rings=8, step_deg=0.2)
+    original = SweepActors.cast
+    scans, actor_hits = {}, {}
+    for culled in (True, False):
+        found = []
+
+        def cast(self, *args, nearer=None, _culled=culled, _found=found):
+            out = original(self, *args, nearer=nearer if _culled else None)
+            _found.append(0 if out is None else len(out.ray))
+            return out
+
+        monkeypatch.setattr(SweepActors, "cast", cast)
+        scans[culled] = SweepSimulator(world, sensor, seed=0).sweep(STILL, 0.0)
+        actor_hits[culled] = sum(found)
+    for field in ("xyz", "true_range_m", "object_id", "object_class", "velocity", "normal"):
+        assert np.array_equal(getattr(scans[True], field), getattr(scans[False], field)), field
+    on_actor = scans[True].object_id >= 2
+    assert on_actor.sum() > 50 and (scans[True].object_id == 1).sum() > 50  # some seen beside the wall, some hidden
+    assert actor_hits[True] == on_actor.sum() < actor_hits[False]
+
+
 def test_a_sequence_with_actors_writes_their_truth_and_tracks_and_reads_them_back(tmp_path):
     x0, y, v = -30.0, 10.0, 15.0
     world = ground_world([translating_box(x0, y, v)])

@@ -12,9 +12,10 @@ import pytest
 
 from simlidar.degeneracy import information_matrix
 from simlidar.formats.truth import octahedral_encode
+from simlidar.kernels.actors import rays_by_block
 from simlidar.kernels.files import fill_body, octahedral_codes, pack_points
 from simlidar.kernels.information import information_sums
-from simlidar.kernels.sweep import block_rays, fill_rows, measure_block, solve_hits
+from simlidar.kernels.sweep import block_rays, fill_actor_rows, fill_rows, measure_block, solve_hits
 
 RNG = np.random.default_rng(7)
 
@@ -149,3 +150,32 @@ def test_information_sums_are_the_information_matrix():
     p, n = RNG.normal(size=(50000, 3)) * 30, unit(50000)
     H = information_sums(p, n)
     assert np.allclose(H, information_matrix(p, n), rtol=1e-12, atol=1e-9) and np.array_equal(H, H.T)
+
+
+def test_rays_by_block_is_a_stable_sort_by_block():
+    counts = np.array([0, 40, 7, 300, 1])
+    rays = np.concatenate([np.sort(RNG.choice(1000, c, replace=False)) for c in counts])
+    actor = np.repeat(np.arange(len(counts)), counts)
+    bounds = np.array([0, 96, 250, 251, 600, 1000])
+    block = np.searchsorted(bounds, rays, side="right") - 1
+    order = np.argsort(block, kind="stable")
+    rows, who, starts = rays_by_block(rays, counts, bounds)
+    assert np.array_equal(rows, rays[order] - bounds[block[order]]) and np.array_equal(who, actor[order])
+    assert np.array_equal(starts, np.searchsorted(block[order], np.arange(len(bounds))))
+
+
+def test_fill_actor_rows_writes_the_moving_objects_truth():
+    m, off = 500, 7
+    actor = np.where(RNG.random(m) < 0.3, RNG.integers(0, 5, m), -1)
+    k = int((actor >= 0).sum())
+    codes = np.array([1, 2, 5, 6, 3], np.uint8)
+    velocity, fast = RNG.normal(size=(k, 3)), RNG.random(k) < 0.5
+    out = np.full(m + 20, 9, np.uint8), np.ones(m + 20, bool), np.full((m + 20, 3), 9.0)
+    fill_actor_rows(off, m, actor, codes, velocity, fast, *out)
+    on = np.flatnonzero(actor >= 0)
+    ref = np.zeros(m, np.uint8), np.zeros(m, bool), np.zeros((m, 3))
+    ref[0][on], ref[1][on], ref[2][on] = codes[actor[on]], fast, velocity
+    for got, want in zip(out, ref, strict=True):
+        assert same(got[off:off + m], want) and np.all(got[:off] == got.flat[0])
+    fill_actor_rows(off, m, np.zeros(0, np.int64), codes, np.zeros((0, 3)), np.zeros(0, bool), *out)  # none hit
+    assert not out[0][off:off + m].any() and not out[1][off:off + m].any() and not out[2][off:off + m].any()

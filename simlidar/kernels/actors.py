@@ -123,7 +123,8 @@ def ray_windows(centre: np.ndarray, alive: np.ndarray, knot_t: np.ndarray, col_t
 @njit(cache=True, nogil=True, error_model="numpy")
 def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, origin: np.ndarray, offset: np.ndarray,
                         direction: np.ndarray, T: np.ndarray, vdt: np.ndarray, turn: np.ndarray, t0: float,
-                        dt: float, box_lo: np.ndarray, box_hi: np.ndarray, max_distance: float):
+                        dt: float, box_lo: np.ndarray, box_hi: np.ndarray, max_distance: float,
+                        nearer_ray: np.ndarray, nearer_distance: np.ndarray, shift: np.ndarray):
     """The candidate rays that cross their actor's box, in the actor's frame at each ray's time.
 
     rows (n,): the call's rays, actor (n,): the actor (of this sweep's) each may meet, t (n,): its time;
@@ -131,8 +132,12 @@ def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, orig
     the actors'
     poses at knots t0 + k dt (dt 0: frozen at the first), vdt (A, K, 3) their velocities times dt, turn
     (A, K - 1, 3) the rotation vector from knot k to k + 1 in knot k's frame; box_lo, box_hi (A, 3) the box
-    (with a margin) in the actor's frame. Returns keep (m,) indices into rows, o (m, 3), d (m, 3) in the
-    actor's frame, R (m, 3, 3) and p (m, 3) the actor's pose at the ray's time.
+    (with a margin) in the actor's frame. nearer_ray (h,), nearer_distance (h,): a hit each of these
+    rays already has (the static world's); a ray whose hit lies before it enters the box is not kept, as no
+    hit of the actor, at least the margin farther, could be the nearer (both may be empty). shift (A, 3): added to
+    the kept rays' origins (where each actor's model lies in the BVH they are cast against). Returns keep (m,)
+    indices into rows, o (m, 3) (shifted), d (m, 3) in the actor's frame, R (m, 3, 3) and p (m, 3) the actor's
+    pose at the ray's time.
     """
     n = rows.shape[0]
     keep = np.empty(n, np.int64)
@@ -145,6 +150,9 @@ def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, orig
     last_a, last_t = -1, np.nan
     px = py = pz = 0.0
     m = 0
+    reach = np.full(origin.shape[0], max_distance)  # per ray of the call, how far a hit may lie to be the nearer
+    for h in range(nearer_ray.shape[0]):
+        reach[nearer_ray[h]] = min(reach[nearer_ray[h]], nearer_distance[h])
     for i in range(n):
         a = actor[i]
         b = rows[i]
@@ -160,6 +168,8 @@ def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, orig
         qx, qy, qz = origin[b, 0] + offset[0] - px, origin[b, 1] + offset[1] - py, origin[b, 2] + offset[2] - pz
         ok = True
         t_in, t_out = 0.0, max_distance
+        if reach[b] < t_out:
+            t_out = reach[b]
         for c in range(3):
             oc = R_out[m, 0, c] * qx + R_out[m, 1, c] * qy + R_out[m, 2, c] * qz
             dc = R_out[m, 0, c] * direction[b, 0] + R_out[m, 1, c] * direction[b, 1] + R_out[m, 2, c] * direction[b, 2]
@@ -173,6 +183,8 @@ def rays_in_actor_frame(rows: np.ndarray, actor: np.ndarray, t: np.ndarray, orig
                     s0, s1 = s1, s0
                 t_in, t_out = max(t_in, s0), min(t_out, s1)
         if ok and t_in <= t_out:
+            for c in range(3):
+                o_out[m, c] += shift[a, c]
             p_out[m, 0], p_out[m, 1], p_out[m, 2] = px, py, pz
             keep[m] = i
             m += 1
@@ -253,23 +265,24 @@ def merge_nearest(static_ray: np.ndarray, static_distance: np.ndarray, actor_ray
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def nearest_actor_hits(n_rays: int, rows: np.ndarray, hit: np.ndarray, distance: np.ndarray, cos: np.ndarray,
-                       n_model: np.ndarray, R: np.ndarray, p: np.ndarray, actor: np.ndarray, t: np.ndarray,
-                       origin: np.ndarray, offset: np.ndarray, direction: np.ndarray, v: np.ndarray, w: np.ndarray,
-                       t0: float, dt: float):
+def nearest_actor_hits(n_rays: int, rows: np.ndarray, keep: np.ndarray, hit: np.ndarray, distance: np.ndarray,
+                       cos: np.ndarray, face: np.ndarray, face_normals: np.ndarray, R: np.ndarray, p: np.ndarray,
+                       actor: np.ndarray, t: np.ndarray, actor_index: np.ndarray, origin: np.ndarray,
+                       offset: np.ndarray, direction: np.ndarray, v: np.ndarray, w: np.ndarray, t0: float, dt: float):
     """Per ray of a call (``n_rays``), the nearest of the actors' hits, in ray order.
 
-    rows (m,), actor (m,), t (m,), R (m, 3, 3), p (m, 3): the rays cast in the actors' frames, their actor,
-    time and the actor's pose then; hit (h,) the rows that hit, at distance (h,), cos (h,), model normal
-    (h, 3); origin + offset (3,), direction (n_rays, 3) in the world; v, w (A, K, 3) the actors' velocities at
-    the knots
-    t0 + k dt. Returns ray (q,), distance (q,), cos (q,), normal (q, 3) outward in the world, actor (q,),
-    velocity (q, 3) of the point hit (v + w x (hit - p), linear between knots). numpy: the lexsort by ray
-    then distance, its first per ray, ``R @ n``.
+    rows (n,), actor (n,), t (n,): the call's candidate rays, their actor and time; keep (m,): those cast in the
+    actors' frames (``rays_in_actor_frame``), R (m, 3, 3), p (m, 3) the actor's pose then; hit (h,) the cast
+    rays that hit (indices into keep), at distance (h,), cos (h,), on triangle face (h,) of the models' BVH
+    (face_normals (F, 3)); actor_index (A,) an actor's index in its set; origin + offset (3,), direction
+    (n_rays, 3) in the world; v, w (A, K, 3) the actors' velocities at the knots t0 + k dt. Returns ray (q,),
+    distance (q,), cos (q,), normal (q, 3) outward in the world, actor (q,) in its set, velocity (q, 3) of the
+    point hit (v + w x (hit - p), linear between knots). numpy: the lexsort by ray then distance, its first per
+    ray, ``R @ n``.
     """
     best = np.full(n_rays, -1, np.int64)
     for i in range(hit.shape[0]):
-        r = rows[hit[i]]
+        r = rows[keep[hit[i]]]
         if best[r] < 0 or distance[i] < distance[best[r]]:
             best[r] = i
     q = 0
@@ -289,13 +302,14 @@ def nearest_actor_hits(n_rays: int, rows: np.ndarray, hit: np.ndarray, distance:
         if i < 0:
             continue
         k_row = hit[i]
-        a = actor[k_row]
-        ray[o], dist[o], cs[o], who[o] = r, distance[i], cos[i], a
+        a = actor[keep[k_row]]
+        ray[o], dist[o], cs[o], who[o] = r, distance[i], cos[i], actor_index[a]
+        f = face[i]
         for c in range(3):
-            normal[o, c] = (R[k_row, c, 0] * n_model[i, 0] + R[k_row, c, 1] * n_model[i, 1]
-                            + R[k_row, c, 2] * n_model[i, 2])
+            normal[o, c] = (R[k_row, c, 0] * face_normals[f, 0] + R[k_row, c, 1] * face_normals[f, 1]
+                            + R[k_row, c, 2] * face_normals[f, 2])
         if dt > 0:
-            x = min(max((t[k_row] - t0) / dt, 0.0), K - 1 - 1e-12)
+            x = min(max((t[keep[k_row]] - t0) / dt, 0.0), K - 1 - 1e-12)
             k = int(x)
             u = x - k
         else:
@@ -339,4 +353,38 @@ def merge_rows(s_ray: np.ndarray, s_face: np.ndarray, s_dist: np.ndarray, s_cos:
     return ray, face, dist, cos, actor, taken[:k]
 
 
-__all__ = ["merge_nearest", "merge_rows", "nearest_actor_hits", "ray_windows", "rays_in_actor_frame"]
+@njit(cache=True, nogil=True)
+def rays_by_block(rays: np.ndarray, counts: np.ndarray, bounds: np.ndarray):
+    """The candidate rays of every actor cut at a sweep's block bounds, block after block.
+
+    rays: (N,) global firing indices, ``counts`` (A,) per actor in turn, each actor's ascending; bounds: (K + 1,)
+    the blocks' first rays and the sweep's end, ascending. Returns rows (N,) within their block, actor (N,)
+    and starts (K + 1,): block k's rows are ``starts[k]:starts[k + 1]``, by actor, then ray. numpy: a stable
+    argsort by ``searchsorted(bounds, rays, side="right") - 1`` of the rays and their actors.
+    """
+    A, K = counts.shape[0], bounds.shape[0] - 1
+    first = np.zeros(A + 1, np.int64)
+    for a in range(A):
+        first[a + 1] = first[a] + counts[a]
+    cut = np.empty((A, K + 1), np.int64)  # where each actor's rays reach each bound
+    for a in range(A):
+        seg = rays[first[a]:first[a + 1]]
+        for k in range(K + 1):
+            cut[a, k] = first[a] + np.searchsorted(seg, bounds[k])
+    starts = np.zeros(K + 1, np.int64)
+    rows = np.empty(first[A], np.int64)
+    actor = np.empty(first[A], np.int64)
+    o = 0
+    for k in range(K):
+        starts[k] = o
+        for a in range(A):
+            for i in range(cut[a, k], cut[a, k + 1]):
+                rows[o] = rays[i] - bounds[k]
+                actor[o] = a
+                o += 1
+    starts[K] = o
+    return rows[:o], actor[:o], starts
+
+
+__all__ = ["merge_nearest", "merge_rows", "nearest_actor_hits", "ray_windows", "rays_by_block",
+           "rays_in_actor_frame"]

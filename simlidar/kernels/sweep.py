@@ -181,7 +181,32 @@ def fill_rows(off: int, first_ray: int, ray: np.ndarray, face: np.ndarray, dista
         true_range_out[o] = t
 
 
-__all__ = ["BATCH_ROWS", "fill_rows", "measure_block", "solve_hits"]
+@njit(cache=True, nogil=True)
+def fill_actor_rows(off: int, m: int, row_actor: np.ndarray, class_code: np.ndarray, velocity: np.ndarray,
+                    fast: np.ndarray, object_class: np.ndarray, moving: np.ndarray, velocity_out: np.ndarray) -> None:
+    """The moving objects' truth of a block's m rows off:off+m of a scan: class, moving, velocity.
+
+    row_actor: (m,) the actor each row hit (-1: the static world), or empty (none did); class_code (A,) uint8;
+    velocity (k, 3), fast (k,): per actor row in order, its velocity in the scan frame (m/s) and whether it
+    moves. numpy: rows of the static world 0, False, 0; an actor's ``class_code[actor]``, ``fast``, ``velocity``.
+    """
+    actors = row_actor.shape[0] == m
+    slot = 0
+    for i in range(m):
+        o = off + i
+        if actors and row_actor[i] >= 0:
+            object_class[o] = class_code[row_actor[i]]
+            moving[o] = fast[slot]
+            velocity_out[o, 0], velocity_out[o, 1], velocity_out[o, 2] = (velocity[slot, 0], velocity[slot, 1],
+                                                                          velocity[slot, 2])
+            slot += 1
+        else:
+            object_class[o] = 0
+            moving[o] = False
+            velocity_out[o, 0] = velocity_out[o, 1] = velocity_out[o, 2] = 0.0
+
+
+__all__ = ["BATCH_ROWS", "block_rays", "fill_actor_rows", "fill_rows", "measure_block", "solve_hits"]
 
 
 @njit(cache=True, nogil=True)
