@@ -178,6 +178,9 @@ def _add_generalize(sub) -> None:
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an odometry parameter for our methods (repeatable), a dotted key: e.g. "
                    "ncf.max_normal_std_deg=3 (salo odometry --keys lists them)")
+    p.add_argument("--resume", action="store_true",
+                   help="read back the sequences a stopped run in --out finished (their poses) and run the rest; "
+                   "with --families narrowed to what finished, it only writes the summary")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     p.set_defaults(func=cmd_generalize)
 
@@ -409,7 +412,8 @@ def cmd_generalize(args) -> int:
         raise CommandError(str(exc)) from None
     out = args.out or DEFAULT_ROOT / f"generalize-{args.split}"
     record = RunRecord(out, "generalize", params.to_dict(), command_line()).start()
-    results = run_generalize(params, record=record, workers=args.workers, progress=args.progress)
+    results = run_generalize(params, record=record, workers=args.workers, progress=args.progress,
+                             resume=args.resume)
     rows = write_generalize(results, params, record)
     for r in rows:
         if r["family"] == "all":

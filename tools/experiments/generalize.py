@@ -23,6 +23,7 @@ import logging
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -151,14 +152,23 @@ class GeneralizeParams:
 
 
 def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, workers: int = 1,
-                   progress: bool = False) -> list[dict]:
-    """Run the suite, ``workers`` sequences at a time; with ``record``, write each sequence's poses as it ends."""
+                   progress: bool = False, resume: bool = False) -> list[dict]:
+    """Run the suite, ``workers`` sequences at a time; with ``record``, write each sequence's poses as it ends.
+    resume: a sequence a stopped run in ``record``'s folder finished is read back (``finished_result``), not run."""
     from tqdm import tqdm
 
     seqs = params.sequences()
     overrides = dict(params.config_overrides)
     results = []
     bar = tqdm(total=len(seqs), unit="sequence", desc="generalize", disable=not progress, dynamic_ncols=True)
+    if resume and record is not None:
+        finished = [finished_result(record.out_dir, seq, params) for seq in seqs]
+        results = [r for r in finished if r is not None]
+        seqs_to_run = [s for s, r in zip(seqs, finished, strict=True) if r is None]
+        bar.update(len(results))
+        log.info("resumed %d finished sequences, %d to run", len(results), len(seqs_to_run))
+    else:
+        seqs_to_run = seqs
 
     def done(res: dict) -> None:
         results.append(res)
@@ -168,7 +178,7 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
         bar.set_postfix_str(res["name"])
 
     if workers <= 1:
-        for seq in seqs:
+        for seq in seqs_to_run:
             done(run_sequence_task(seq, params.methods, overrides, params.segment_lengths_m))
     else:
         from concurrent.futures import as_completed
@@ -177,7 +187,7 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
 
         with spawned_pool(workers) as pool:
             futures = [pool.submit(run_sequence_task, seq, params.methods, overrides, params.segment_lengths_m)
-                       for seq in seqs]
+                       for seq in seqs_to_run]
             for f in as_completed(futures):
                 done(f.result())
     bar.close()
@@ -186,6 +196,8 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
 
 
 def _write_poses(record: RunRecord, res: dict) -> None:
+    """A finished sequence's poses (gt.txt, METHOD.txt) and, last, its result.json (without the poses): what
+    ``finished_result`` reads back."""
     from simlidar.formats.kitti import write_kitti_poses
 
     if "gt" in res:
@@ -193,6 +205,43 @@ def _write_poses(record: RunRecord, res: dict) -> None:
     for m, r in res["methods"].items():
         if r.get("poses") is not None:
             write_kitti_poses(record.path(f"poses/{res['name']}/{m}.txt"), r["poses"])
+    write_json(record.path(f"poses/{res['name']}/result.json"), {k: v for k, v in res.items() if k != "gt"} | {
+        "methods": {m: {k: v for k, v in x.items() if k != "poses"} for m, x in res["methods"].items()}})
+
+
+def finished_result(folder: Path, seq: SuiteSequence, params: GeneralizeParams) -> dict | None:
+    """The result of a sequence a stopped run in ``folder`` finished, as ``run_sequence_task`` returns it, or None
+    (not finished, another frame count, or a method asked for now without its run there). The figures are
+    computed again from the poses (``params``' segments); frames/s, flags and notes come from its result.json,
+    which a run before it was written lacks (frames/s then unknown: nan)."""
+    import json
+
+    from simlidar.formats.kitti import read_kitti_poses
+
+    d = Path(folder) / "poses" / seq.name
+    if not (d / "gt.txt").is_file():
+        return None
+    gt = read_kitti_poses(d / "gt.txt")
+    saved = json.loads((d / "result.json").read_text()) if (d / "result.json").is_file() else None
+    if len(gt) != params.frames or (saved is not None and saved.get("error")):
+        return None
+    saved_methods = (saved or {}).get("methods", {})
+    res = saved or {"sequence": asdict(seq), "name": seq.name}
+    res["methods"], res["gt"] = {}, gt
+    for m in params.methods:
+        before = saved_methods.get(m)
+        if before is not None and not before.get("ok"):
+            res["methods"][m] = before  # (a peer not installed, a method that failed: as it was)
+            continue
+        if not (d / f"{m}.txt").is_file():
+            return None
+        x = {"ok": True, "note": "read back from its poses", "frames_per_second": float("nan"), "flags": {}}
+        x.update({k: before[k] for k in ("note", "frames_per_second", "flags") if before and k in before})
+        x["poses"] = read_kitti_poses(d / f"{m}.txt")
+        x.update(trajectory_figures(gt, x["poses"], params.segment_lengths_m))
+        x["failed"] = bool(x["diverged"] or x["t_err_pct"] > FAILURE_T_ERR_PCT)
+        res["methods"][m] = x
+    return res
 
 
 # ---------------------------------------------------------------- summaries
