@@ -204,6 +204,23 @@ class DegeneracyParams(_Stage):
 
 
 @dataclass(frozen=True)
+class ImuParams(_Stage):
+    """The IMU between scans (odometry/inertial.py): prediction, de-skew and the weak directions' prior."""
+
+    section_name = "imu"
+    enabled: bool = param(False, "with the sequence's IMU samples: predict each scan's motion and de-skew its sweep "
+                          "with the preintegrated gyroscope and accelerometer instead of constant velocity (the "
+                          "prior in weakly constrained directions); without samples nothing changes")
+    window_frames: int = param(20, "the sliding window (frames) over which velocity, gravity and the biases are "
+                               "fitted to the registered poses; the IMU predicts once the first window is full",
+                               min=3)
+    position_std_m: float = param(0.02, "the registered positions' standard deviation in the window's fit "
+                                  "(against the biases' priors)", above=0.0)
+    rotation_std_deg: float = param(0.01, "the registered rotations' standard deviation in the gyroscope bias's "
+                                    "fit", above=0.0)
+
+
+@dataclass(frozen=True)
 class OdometryConfig(Params):
     """Parameters of the ICP odometry, grouped by stage. Units in names; degrees only where named ``*_deg``.
 
@@ -232,6 +249,7 @@ class OdometryConfig(Params):
     gcr: GcrParams = section(GcrParams)
     icp: IcpParams = section(IcpParams)
     degeneracy: DegeneracyParams = section(DegeneracyParams)
+    imu: ImuParams = section(ImuParams)
 
     def __post_init__(self) -> None:
         try:

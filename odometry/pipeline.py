@@ -4,12 +4,13 @@ One scan's registration is four stages, each a method of ``Odometry`` with its i
 outputs in its signature::
 
     prepare   clean, voxel grid, normals, NCF, curvature; poles       (odometry.preparation; no state)
-    predict   the constant-velocity motion guess; the scan de-skewed with it
+    predict   the constant-velocity motion guess (with ``imu.enabled`` and the sequence's IMU: the
+              preintegrated IMU's, odometry.inertial); the scan de-skewed with it
     align     the motion: the cold start (the second scan, odometry.cold_start) or tracking
               (ICP from the guess, the scan re-de-skewed at every step), then the de-skew
               refinements; an estimate far from the guess is no motion (extrapolated)
-    update    pose = previous pose x motion; the motion prior; the scan, de-skewed with the
-              motion, becomes the next target or joins the map
+    update    pose = previous pose x motion; the motion prior (and the IMU's velocity and biases); the
+              scan, de-skewed with the motion, becomes the next target or joins the map
 
 ``register_frames`` (and ``run_sequence`` over it) prepares the next scans on threads of their
 own while the current one registers: the same poses, both cores at work. The open-loop harness
@@ -42,6 +43,7 @@ from .deskew import RedeskewMemo, redeskew_scan
 from .diagnostics import FrameDiagnostics
 from .filters import FilteredScan, background, scan_normals_needed
 from .icp import NearestCache, RegistrationResult, Source, Target, match, register, rejectors_for
+from .inertial import InertialOdometry
 from .kdtree import KDTree
 from .local_map import LocalMap
 from .poles import PoleMap
@@ -93,6 +95,9 @@ class FrameInProgress:
     T_deskew: (4, 4) the motion its ICP points are de-skewed with now (the guess, until the
     alignment moves it); xi_deskew: its (6,) twist. memo: the points' re-de-skew memo
     (``deskew.redeskew``). started_s: when ``predict`` began (``time.perf_counter``).
+    sweep_correction: with the IMU's prediction, (4, 4) ``T_guess^-1 S`` (S: the IMU's motion over
+    the scan's own sweep), which a frame motion is composed with to de-skew the sweep; None: the
+    frame's motion is the sweep's (constant velocity).
     """
 
     prepared: PreparedScan
@@ -102,6 +107,7 @@ class FrameInProgress:
     xi_deskew: np.ndarray
     memo: RedeskewMemo
     started_s: float
+    sweep_correction: np.ndarray | None = None
 
     @property
     def scan(self) -> FilteredScan:
@@ -118,6 +124,11 @@ class FrameInProgress:
     @property
     def deskewing(self) -> bool:
         return self.prepared.deskewing
+
+    def sweep_motion(self, motion: np.ndarray) -> np.ndarray:
+        """The sweep's motion (4, 4) for a frame motion ``T_prev_cur`` (4, 4): the same (constant velocity),
+        or with the IMU, the frame motion changed as the IMU says the sweep's differs from it."""
+        return motion if self.sweep_correction is None else motion @ self.sweep_correction
 
     def deskew_with(self, motion: np.ndarray) -> None:
         """Re-de-skew the scan's ICP points, normals and poles with ``motion`` (4, 4) instead of ``T_deskew``."""
@@ -190,12 +201,15 @@ class Odometry:
         config: the variant's parameters (``odometry.config``).
         sensor: the lidar model; needed by the GCR (ring pitches, azimuth step),
             and by the sensor-aware NCF for its range noise unless the config sets it.
+        imu: the sequence's IMU samples (``simlidar.imu.ImuSamples``, the stamps' time base), or None;
+            used with ``imu.enabled`` (``odometry.inertial``: its mounting from the sensor's ``imu``
+            section), and only for scans registered with their ``stamp_s``.
 
     ``register`` returns the pose ``T_world_lidar`` (4, 4) of each scan in the first scan's
     frame; ``last`` holds the latest ``FrameDiagnostics``. The stages: the module's docstring.
     """
 
-    def __init__(self, config: OdometryConfig, sensor: LidarModel | None = None):
+    def __init__(self, config: OdometryConfig, sensor: LidarModel | None = None, imu=None):
         if config.gcr.enabled and sensor is None:
             raise OdometryError(
                 f"variant '{config.name}' uses the geometric correspondence rejector, which needs the "
@@ -208,6 +222,11 @@ class Odometry:
         self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None,
                                    pole_map=self._new_pole_map() if self.with_poles else None)
         self.diagnostics: list[FrameDiagnostics] = []
+        self.inertial = None
+        if config.imu.enabled and imu is not None and len(imu) >= 2:
+            from simlidar.imu import ImuModel
+
+            self.inertial = InertialOdometry(imu, sensor.imu if sensor is not None else ImuModel(), config.imu)
         # The rejection chains, built once: with GCR, and without (the cold start: GCR needs a close guess)
         self._chain_with_gcr = rejectors_for(config)
         self._chain_without_gcr = rejectors_for(config.replace(gcr={"enabled": False}))
@@ -268,16 +287,22 @@ class Odometry:
         prepared.registered = True
         started = time.perf_counter()
         prepared.diag.frame = len(self.poses)
+        previous_stamp = self.state.last_stamp_s
         period = self._frame_period(stamp_s)
-        T_guess = self._predicted_motion(period)
+        T_guess, correction = self._predicted_motion(period), None
+        if self.inertial is not None and self.poses:
+            imu = self.inertial.predict(self.poses[-1], previous_stamp, stamp_s, period)
+            if imu is not None:
+                T_guess, correction = imu.motion, se3.inverse(imu.motion) @ imu.sweep
+        T_sweep = T_guess if correction is None else T_guess @ correction
         prepared.diag.deskewed = prepared.deskewing
         t = time.perf_counter()
         memo = RedeskewMemo()
         if prepared.deskewing:  # (filtered as measured: its ICP points, normals and centroids follow the motion)
-            redeskew_scan(prepared.scan, np.eye(4), T_guess, period, centroids_motion=np.eye(4), memo=memo)
+            redeskew_scan(prepared.scan, np.eye(4), T_sweep, period, centroids_motion=np.eye(4), memo=memo)
         prepared.seconds["deskew"] = time.perf_counter() - t
         prepared.diag.too_few_points = len(prepared.scan) < self.config.filter.min_points
-        return FrameInProgress(prepared, period, T_guess, T_guess, se3.log(T_guess), memo, started)
+        return FrameInProgress(prepared, period, T_guess, T_sweep, se3.log(T_sweep), memo, started, correction)
 
     def align(self, frame: FrameInProgress) -> Alignment:
         """The frame's motion ``T_prev_cur``: the identity for the first scan, the guess for a scan that
@@ -338,7 +363,7 @@ class Odometry:
         if frame.deskewing:
             def reskew(T_target_cur: np.ndarray) -> np.ndarray:
                 before = frame.T_deskew
-                frame.deskew_with(halfway(frame.xi_deskew, place.motion_of(T_target_cur)))
+                frame.deskew_with(halfway(frame.xi_deskew, frame.sweep_motion(place.motion_of(T_target_cur))))
                 source.points = frame.scan.points
                 source.poles = None if frame.scan.poles is None else frame.scan.poles.points
                 return se3.log(se3.inverse(before) @ frame.T_deskew)
@@ -368,7 +393,7 @@ class Odometry:
                 reg.target, reg.nearest = self._cold_start_target(reg.cold_start_kind), NearestCache()
                 frame.deskew_with(motion)
             else:
-                frame.deskew_with(halfway(frame.xi_deskew, motion))
+                frame.deskew_with(halfway(frame.xi_deskew, frame.sweep_motion(motion)))
             scan = frame.scan
             reg.source = Source(scan.points, scan.normals, reg.source.gcr_threshold_m,
                                 poles=None if scan.poles is None else scan.poles.points)
@@ -387,6 +412,8 @@ class Odometry:
         T, scan = alignment.motion, frame.scan
         # (re-orthonormalised: with a map, T = previous^-1 x estimate feeds rounding back)
         pose = se3.orthonormalize(st.poses[-1] @ T) if st.poses else np.eye(4)
+        if self.inertial is not None:
+            self._update_inertial(frame, pose)
         if st.poses:
             st.T_prev_cur = T
         st.poses.append(pose)
@@ -395,11 +422,13 @@ class Odometry:
             return
         t = time.perf_counter()
         redo = frame.deskewing and len(st.poses) > 1
+        T_sweep = frame.sweep_motion(T)
         if redo:  # (its centroids are still de-skewed with the guess)
-            redeskew_scan(scan, frame.T_deskew, T, frame.period_s, centroids_motion=frame.T_guess, memo=frame.memo)
+            centroids = frame.sweep_motion(frame.T_guess)
+            redeskew_scan(scan, frame.T_deskew, T_sweep, frame.period_s, centroids_motion=centroids, memo=frame.memo)
         st.target_scan = scan
         st.target_frame = len(st.poses) - 1
-        st.target_motion = T if redo else frame.T_deskew
+        st.target_motion = T_sweep if redo else frame.T_deskew
         if st.local_map is None:  # (the next target's tree, built while the next scan is prepared)
             st.target_tree = (scan.points, background().submit(KDTree, scan.points))
         else:
@@ -409,6 +438,18 @@ class Odometry:
             st.pole_map.add(se3.transform_points(pose, scan.poles.points), scan.poles.cluttered)
         stage = "map" if st.local_map is not None else "deskew"  # (the re-de-skew counts with the map's update)
         frame.seconds[stage] = frame.seconds.get(stage, 0.0) + time.perf_counter() - t
+
+    def _update_inertial(self, frame: FrameInProgress, pose: np.ndarray) -> None:
+        """The IMU's window takes the frame's pose (4, 4) (before ``update`` moves the target), with the
+        registration's weakest translation, from its target's frame to the world, and its eigenvalue."""
+        st, diag = self.state, frame.diag
+        weak, eigenvalue = None, 1.0
+        if np.all(np.isfinite(diag.weakest_direction)) and np.isfinite(diag.translation_eigenvalues[0]):
+            R_world_target = (np.eye(3) if st.local_map is not None or not st.poses
+                              else st.poses[st.target_frame][:3, :3])
+            weak = R_world_target @ diag.weakest_direction
+            weak, eigenvalue = weak / np.linalg.norm(weak), float(diag.translation_eigenvalues[0])
+        self.inertial.update(pose, st.last_stamp_s, weak, eigenvalue, not diag.extrapolated)
 
     def conclude(self, frame: FrameInProgress) -> None:
         """The frame's diagnostics: its total time (its preparation's included, wherever that ran), kept
@@ -697,11 +738,13 @@ def run_sequence(
 ) -> OdometryRun:
     """Run the odometry over (a slice of) a sequence; ``on_frame(k, diagnostics)`` after each frame.
 
-    The poses are relative to the first frame run. The sensor defaults to the sequence's own.
+    The poses are relative to the first frame run. The sensor defaults to the sequence's own. With
+    ``imu.enabled``, the sequence's IMU (``sequence.imu``, when it has one) goes to the odometry.
     prefetch: scans prepared ahead on threads of their own (``register_frames``; 0: none; None: the default).
     """
     idx = frames_of(sequence, frames)
-    odo = Odometry(config, sensor or sequence.sensor)
+    imu = getattr(sequence, "imu", None) if config.imu.enabled else None
+    odo = Odometry(config, sensor or sequence.sensor, imu=imu)
     t0 = time.perf_counter()
     for k, _ in zip(idx, register_frames(odo, scan_inputs(sequence, idx), prefetch), strict=True):
         if on_frame is not None:

@@ -1,0 +1,379 @@
+"""The IMU between scans: preintegration, the next scan's predicted pose, the motion within a sweep,
+and the velocity, gravity and biases fitted to the registered poses as the scans go.
+
+Preintegration (Forster, Carlone, Dellaert and Scaramuzza, "On-Manifold Preintegration for
+Real-Time Visual-Inertial Odometry", IEEE T-RO 2017, Sec. V-A): between IMU times t_i and t_j,
+with the biases b_g, b_a held, in the IMU frame at t_i::
+
+    dR = prod_k Exp((w_k - b_g) dt_k)
+    dv = sum_k dR_k (a_k - b_a) dt_k
+    dp = sum_k [dv_k dt_k + 1/2 dR_k (a_k - b_a) dt_k^2]
+
+and the state at t_j follows from the state at t_i, gravity g (world) and Dt = t_j - t_i::
+
+    R_j = R_i dR,   v_j = v_i + g Dt + R_i dv,   p_j = p_i + v_i Dt + 1/2 g Dt^2 + R_i dp.
+
+Each step here takes the mean of its two end samples (interpolated linearly at t_i and t_j) and
+dR_k at the step's middle, a midpoint form of Forster's Euler steps whose error falls with dt^2
+(``preintegration_error_bound``); the first-order Jacobians of dv and dp in b_a go with it (their
+Appendix, the same recursion), so a window's fit moves the accelerometer bias without integrating
+again.
+
+The estimator (``InertialOdometry``): after each scan, a sliding window of the last
+``imu.window_frames`` registered poses is fitted by linear least squares for the IMU's position
+and velocity at the window's start, gravity and the accelerometer's bias: each pose's IMU origin
+is the chain of the preintegrated segments from the start (the poses' own rotations carry each
+segment, so the gyroscope's drift does not enter), against the registered positions. A frame the
+registration flagged weak contributes only across its weakest direction (there its position is the
+prediction itself, no evidence), an extrapolated frame nothing. Priors: the start's position (the
+registered one), velocity (the last fit's, loose before the first), gravity (the last fit's; at
+first the mean specific force's direction, loose) and its magnitude (``gravity_m_s2`` of the
+sensor file's ``imu`` section, tight), the bias (the last fit's, with the turn-on spread or the
+random walk over the window). The gyroscope's bias is a weighted mean of what each segment's
+rotation, against the registered rotations, says it is, with the same kind of prior.
+
+The lidar-to-IMU transform, the IMU's clock offset and gravity's magnitude come from the sensor
+file's ``imu`` section (``simlidar.imu.ImuModel``; its defaults when it has none: the IMU at the
+lidar, no offset).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simlidar import se3
+from simlidar.imu import ImuModel, ImuSamples
+
+from .config import ImuParams
+
+
+@dataclass
+class Preintegrated:
+    """The IMU's motion between two IMU times, in the IMU frame at the first (Forster's dR, dv, dp).
+
+    dt_s: the span, s. dR: (3, 3). dv: (3,) m/s. dp: (3,) m. dv_dba, dp_dba: (3, 3) their first-order
+    Jacobians in the accelerometer bias. gyro_bias (rad/s), accel_bias (m/s^2): (3,) the biases held.
+    """
+
+    dt_s: float
+    dR: np.ndarray
+    dv: np.ndarray
+    dp: np.ndarray
+    dv_dba: np.ndarray
+    dp_dba: np.ndarray
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+
+    def corrected(self, accel_bias: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(dv, dp) for another accelerometer bias (3,), to first order."""
+        d = np.asarray(accel_bias) - self.accel_bias
+        return self.dv + self.dv_dba @ d, self.dp + self.dp_dba @ d
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """(3, 3) ``Exp`` of a (3,) rotation vector, rad (Rodrigues)."""
+    theta = math.sqrt(float(w @ w))
+    K = se3.hat(w)
+    if theta < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + math.sin(theta) / theta * K + (1.0 - math.cos(theta)) / theta**2 * K @ K
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector of a (3, 3) rotation, rad."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    return se3.log(T)[3:]
+
+
+def preintegrate(samples: ImuSamples, t0: float, t1: float, gyro_bias: np.ndarray, accel_bias: np.ndarray
+                 ) -> Preintegrated | None:
+    """Forster's preintegration (module doc) of ``samples`` over the IMU times [t0, t1], s; None when the
+    samples do not cover the span."""
+    t = samples.time_s
+    if not (t1 > t0) or len(t) < 2 or t[0] > t0 + 1e-9 or t[-1] < t1 - 1e-9:
+        return None
+    lo = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
+    hi = min(int(np.searchsorted(t, t1, side="left")) + 1, len(t))
+    ts, w, a = t[lo:hi], samples.angular_velocity[lo:hi], samples.specific_force[lo:hi]
+    inner = (ts > t0) & (ts < t1)
+    times = np.concatenate([[t0], ts[inner], [t1]])
+    wk = np.stack([np.interp(times, ts, w[:, i]) for i in range(3)], axis=1) - gyro_bias
+    ak = np.stack([np.interp(times, ts, a[:, i]) for i in range(3)], axis=1) - accel_bias
+    dR, dv, dp = np.eye(3), np.zeros(3), np.zeros(3)
+    dv_dba, dp_dba = np.zeros((3, 3)), np.zeros((3, 3))
+    for k in range(len(times) - 1):
+        h = times[k + 1] - times[k]
+        w_mean, a_mean = 0.5 * (wk[k] + wk[k + 1]), 0.5 * (ak[k] + ak[k + 1])
+        R_mid = dR @ so3_exp(0.5 * h * w_mean)
+        dp = dp + dv * h + 0.5 * (R_mid @ a_mean) * h * h
+        dp_dba = dp_dba + dv_dba * h - 0.5 * R_mid * h * h
+        dv = dv + (R_mid @ a_mean) * h
+        dv_dba = dv_dba - R_mid * h
+        dR = dR @ so3_exp(h * w_mean)
+    return Preintegrated(float(t1 - t0), dR, dv, dp, dv_dba, dp_dba, np.array(gyro_bias, dtype=float),
+                         np.array(accel_bias, dtype=float))
+
+
+def preintegration_error_bound(dt_s: float, span_s: float, specific_force_m_s2: float, jerk_m_s3: float,
+                               angular_rate_rad_s: float, angular_accel_rad_s2: float,
+                               jerk_rate_m_s4: float = math.inf) -> tuple[float, float]:
+    """Bounds (position m, rotation rad) on the error of ``preintegrate`` of noise-free samples every ``dt_s``
+    over ``span_s`` (both s), for a motion whose specific force is at most f (m/s^2), changes at most J
+    (m/s^3) and its rate of change at most J2 (m/s^4, when given), whose angular rate is at most w (rad/s) and
+    changes at most alpha (rad/s^2), in the span.
+
+    With h = dt_s and T = span_s, no cancellation assumed:
+
+    - attitude: a step's rotation vector h (w_k + w_k+1) / 2 misses the rate's integral by at most
+      alpha h^2 / 4 (the trapezoid rule for a rate that changes at most alpha) and the non-commuting part
+      by w alpha h^3 / 12; over T / h steps, and the two interpolated end samples (each at most alpha h / 2
+      off, for at most h): theta = alpha h T / 4 (1 + w h / 3) + alpha h^2;
+    - acceleration, per unit time: the mean of a step's end samples misses the force's mean by at most
+      min(J h / 4, J2 h^2 / 12) (the trapezoid rule's bounds); turning the force with the step's middle
+      attitude instead of along the step leaves out w J h^2 / 12 + (w^2 + alpha) f h^2 / 24 (the odd
+      first-order term integrates to zero); the middle attitude is off by at most theta, so
+      E = f theta + min(J h / 4, J2 h^2 / 12) + w J h^2 / 12 + (w^2 + alpha) f h^2 / 24;
+    - position: an acceleration error E over the span moves it by at most E T^2 / 2, and the two
+      interpolated end samples (each at most min(J h / 2, J2 h^2 / 8) off, for at most h / 2 of weight)
+      add that times h of velocity, for T.
+    """
+    h, T, f, J, w, a = dt_s, span_s, specific_force_m_s2, jerk_m_s3, angular_rate_rad_s, angular_accel_rad_s2
+    theta = a * h * T / 4 * (1 + w * h / 3) + a * h * h
+    E = f * theta + min(J * h / 4, jerk_rate_m_s4 * h * h / 12) + w * J * h * h / 12 + (w * w + a) * f * h * h / 24
+    return E * T * T / 2 + min(J * h / 2, jerk_rate_m_s4 * h * h / 8) * h * T, theta
+
+
+@dataclass
+class _Record:
+    """One registered frame in the window: lidar time (s), pose (4, 4), the registration's weakest
+    translation (world, unit) or None and its eigenvalue (the scaled information per match), whether its
+    pose is a registration (not extrapolated), the segment from the previous frame (None for the first),
+    and the velocity (3,) estimated for it."""
+
+    time_s: float
+    pose: np.ndarray
+    weak_direction: np.ndarray | None
+    weak_eigenvalue: float
+    usable: bool
+    segment: Preintegrated | None
+    velocity: np.ndarray | None = None
+
+
+@dataclass
+class InertialPrediction:
+    """The IMU's prediction of one scan: ``motion`` (4, 4) ``T_prev_cur``, and ``sweep`` (4, 4) the lidar's
+    motion over the scan's own sweep (the next sweep's start in this one's start frame)."""
+
+    motion: np.ndarray
+    sweep: np.ndarray
+
+
+@dataclass
+class InertialOdometry:
+    """The IMU's state between scans (module doc): ``predict`` a scan's motion and sweep, ``update`` with
+    its registered pose.
+
+    samples: the sequence's IMU (``simlidar.imu.ImuSamples``, stamps in the IMU's clock, the sequence's
+    time base). model: the sensor file's ``imu`` section (mounting, clock offset, gravity, noise).
+    params: the config's ``imu`` section.
+    """
+
+    samples: ImuSamples
+    model: ImuModel
+    params: ImuParams
+    velocity: np.ndarray | None = None  # (3,) the IMU origin's world velocity at the last frame, m/s
+    gravity: np.ndarray | None = None  # (3,) world, m/s^2
+    gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    records: deque = field(default_factory=deque)
+    _constants_cov: np.ndarray | None = None  # (6, 6) the last fit's covariance of gravity and the bias
+
+    def __post_init__(self) -> None:
+        self.T_lidar_imu = self.model.T_lidar_imu
+        self.T_imu_lidar = se3.inverse(self.T_lidar_imu)
+        self.records = deque(maxlen=self.params.window_frames)
+
+    @property
+    def ready(self) -> bool:
+        """The first window was fitted: the IMU predicts."""
+        return self.velocity is not None and self.gravity is not None
+
+    def _imu_time(self, lidar_time_s: float) -> float:
+        return lidar_time_s + self.model.time_offset_s
+
+    def _segment(self, t0: float, t1: float) -> Preintegrated | None:
+        return preintegrate(self.samples, self._imu_time(t0), self._imu_time(t1), self.gyro_bias, self.accel_bias)
+
+    def _advance(self, T_world_imu: np.ndarray, v: np.ndarray, seg: Preintegrated) -> tuple[np.ndarray, np.ndarray]:
+        """The IMU pose (4, 4) and velocity (3,) after ``seg`` from (T_world_imu, v)."""
+        R, p, dt = T_world_imu[:3, :3], T_world_imu[:3, 3], seg.dt_s
+        dv, dp = seg.corrected(self.accel_bias)
+        out = np.eye(4)
+        out[:3, :3] = R @ seg.dR
+        out[:3, 3] = p + v * dt + 0.5 * self.gravity * dt * dt + R @ dp
+        return out, v + self.gravity * dt + R @ dv
+
+    def predict(self, T_world_prev: np.ndarray, prev_time_s: float | None, time_s: float | None,
+                period_s: float) -> InertialPrediction | None:
+        """The scan at lidar time ``time_s`` (its sweep ``period_s`` long) after the frame at ``T_world_prev``
+        (4, 4) and ``prev_time_s``: None before the first window's fit, without times, or where the samples
+        do not cover the span."""
+        if not self.ready or prev_time_s is None or time_s is None or not self.records:
+            return None
+        seg = self._segment(prev_time_s, time_s)
+        if seg is None:
+            return None
+        T_imu, v = self._advance(T_world_prev @ self.T_lidar_imu, self.velocity, seg)
+        T_world_cur = T_imu @ self.T_imu_lidar
+        motion = se3.inverse(T_world_prev) @ T_world_cur
+        sweep_seg = self._segment(time_s, time_s + period_s)
+        if sweep_seg is None:
+            return InertialPrediction(motion, motion)
+        T_next, _ = self._advance(T_imu, v, sweep_seg)
+        return InertialPrediction(motion, se3.inverse(T_world_cur) @ (T_next @ self.T_imu_lidar))
+
+    def update(self, T_world_cur: np.ndarray, time_s: float | None, weak_direction_world: np.ndarray | None,
+               weak_eigenvalue: float, usable: bool) -> None:
+        """Take a frame's registered pose (4, 4) at lidar time ``time_s``: the velocity carried to it, and
+        the window refitted. weak_direction_world: (3,) the registration's weakest translation (world), or
+        None; weak_eigenvalue: its scaled information per match. usable: the pose is a registration, not an
+        extrapolation."""
+        if time_s is None:  # (no stamps: nothing to integrate between; the window starts again)
+            self.records.clear()
+            self.velocity = None
+            return
+        seg = None
+        if self.records:
+            prev = self.records[-1]
+            seg = self._segment(prev.time_s, time_s)
+            if seg is None:  # (a gap in the samples: the chain breaks; start a new window)
+                self.records.clear()
+                self.velocity = None
+            elif self.velocity is not None:
+                _, self.velocity = self._advance(prev.pose @ self.T_lidar_imu, self.velocity, seg)
+        self.records.append(_Record(float(time_s), np.array(T_world_cur), weak_direction_world,
+                                    float(weak_eigenvalue), bool(usable), seg,
+                                    None if self.velocity is None else self.velocity.copy()))
+        if len(self.records) == self.records.maxlen:
+            self._fit_gyro_bias()
+            self._fit_window()
+
+    # ---- the window's fits
+    def _fit_gyro_bias(self) -> None:
+        """The gyroscope's bias: each segment between registered frames says ``b_s - Log(dR_s^T dR_lidar) / Dt``
+        (its rotation integrated with b_s against the registered one); their weighted mean with the last
+        estimate as a prior."""
+        recs = list(self.records)
+        rot_var = math.radians(self.params.rotation_std_deg) ** 2 * 2  # (two poses' errors in each relative rotation)
+        prior_std = max(self.model.gyroscope_turn_on_bias,
+                        self.model.gyroscope_random_walk * math.sqrt(self._window_s()), 1e-7)
+        info, total = 1.0 / prior_std**2, self.gyro_bias / prior_std**2
+        for a, b in zip(recs[:-1], recs[1:], strict=True):
+            if not (a.usable and b.usable) or b.segment is None:
+                continue
+            R_a, R_b = a.pose[:3, :3] @ self.T_lidar_imu[:3, :3], b.pose[:3, :3] @ self.T_lidar_imu[:3, :3]
+            seg = b.segment
+            said = seg.gyro_bias - so3_log(seg.dR.T @ (R_a.T @ R_b)) / seg.dt_s
+            weight = seg.dt_s**2 / rot_var
+            info, total = info + weight, total + weight * said
+        self.gyro_bias = total / info
+
+    def _window_s(self) -> float:
+        return self.records[-1].time_s - self.records[0].time_s
+
+    def _initial_gravity(self) -> np.ndarray:
+        """Gravity (world, 3,) from the mean specific force over the window's first segment: the vehicle's own
+        acceleration is the error, which the fit removes."""
+        first, second = self.records[0], self.records[1]
+        s = self.samples.between(self._imu_time(first.time_s), self._imu_time(second.time_s))
+        f = s.specific_force.mean(axis=0) if len(s) else np.array([0.0, 0.0, self.model.gravity_m_s2])
+        f_world = first.pose[:3, :3] @ self.T_lidar_imu[:3, :3] @ f
+        return -self.model.gravity_m_s2 * f_world / max(np.linalg.norm(f_world), 1e-9)
+
+    def _fit_window(self) -> None:
+        """Least squares for x = (p_0, v_0, g, delta b_a) (12,) over the window (module doc), twice (gravity's
+        magnitude is linearised about the estimate)."""
+        recs = list(self.records)
+        first_fit = self.gravity is None or recs[0].velocity is None
+        g_prior = self._initial_gravity() if self.gravity is None else self.gravity
+        v_prior = np.zeros(3) if recs[0].velocity is None else recs[0].velocity
+        v_prior_std = 100.0 if first_fit else 0.1
+        if self._constants_cov is None:  # (the first fit: gravity from the specific force, loosely; the bias 0)
+            ba_std = max(self.model.accelerometer_turn_on_bias, 1e-3)
+            prior_cov = np.diag([1.0] * 3 + [ba_std**2] * 3)
+        else:  # (the last fit's, the bias's random walk over a frame added)
+            dt = recs[-1].time_s - recs[-2].time_s
+            prior_cov = self._constants_cov + np.diag([0.0] * 3 + [self.model.accelerometer_random_walk**2 * dt] * 3)
+        sigma_p = self.params.position_std_m
+        # The chain: p_k = A_k x + c_k, v_k = B_k x + e_k
+        A, c = np.zeros((3, 12)), np.zeros(3)
+        B, e = np.zeros((3, 12)), np.zeros(3)
+        A[:, 0:3] = np.eye(3)
+        B[:, 3:6] = np.eye(3)
+        chains = [(A.copy(), c.copy(), B.copy(), e.copy())]
+        for prev, rec in zip(recs[:-1], recs[1:], strict=True):
+            seg = rec.segment
+            R = prev.pose[:3, :3] @ self.T_lidar_imu[:3, :3]
+            dt = seg.dt_s
+            dv, dp = seg.corrected(self.accel_bias)
+            A = A + dt * B
+            A[:, 6:9] += 0.5 * dt * dt * np.eye(3)
+            A[:, 9:12] += R @ seg.dp_dba
+            c = c + dt * e + R @ dp
+            B = B.copy()
+            B[:, 6:9] += dt * np.eye(3)
+            B[:, 9:12] += R @ seg.dv_dba
+            e = e + R @ dv
+            chains.append((A.copy(), c.copy(), B.copy(), e.copy()))
+        rows, rhs = [], []
+
+        def add(J: np.ndarray, y: np.ndarray, std: float) -> None:
+            rows.append(J / std)
+            rhs.append(y / std)
+
+        positions = [(r.pose @ self.T_lidar_imu)[:3, 3] for r in recs]
+        add(np.eye(3, 12), positions[0], sigma_p)
+        for rec, (A_k, c_k, _, _), p in zip(recs[1:], chains[1:], positions[1:], strict=True):
+            if not rec.usable:
+                continue
+            # (scaled by the information across the weakest direction: 1/3 per match is the most one direction
+            # can have among three, ``odometry.constraints``; along it the position counts in proportion)
+            W = np.eye(3)
+            if rec.weak_direction is not None:
+                u = rec.weak_direction
+                scale = math.sqrt(min(max(rec.weak_eigenvalue, 0.0) * 3.0, 1.0))
+                W = W + (scale - 1.0) * np.outer(u, u)
+            add(W @ A_k, W @ (p - c_k), sigma_p)
+        add(np.eye(3, 12, 3), v_prior, v_prior_std)
+        L = np.linalg.cholesky(np.linalg.inv(prior_cov)).T  # (rows whitening the constants' prior)
+        J_prior = np.zeros((6, 12))
+        J_prior[:, 6:12] = L
+        rows.append(J_prior)
+        rhs.append(L @ np.concatenate([g_prior, np.zeros(3)]))
+        g = g_prior
+        x = None
+        for _ in range(2):
+            unit = g / np.linalg.norm(g)
+            mag = np.zeros((1, 12))
+            mag[0, 6:9] = unit
+            J = np.vstack([*rows, mag / 1e-3])
+            y = np.concatenate([*rhs, [self.model.gravity_m_s2 / 1e-3]])
+            x = np.linalg.lstsq(J, y, rcond=None)[0]
+            g = x[6:9]
+        self._constants_cov = np.linalg.inv(J.T @ J)[6:12, 6:12]
+        B_n, e_n = chains[-1][2], chains[-1][3]
+        for rec, (_, _, B_k, e_k) in zip(recs, chains, strict=True):
+            rec.velocity = B_k @ x + e_k
+        self.velocity = B_n @ x + e_n
+        self.gravity = x[6:9]
+        self.accel_bias = self.accel_bias + x[9:12]
+        # (the segments keep the bias they were integrated with: ``corrected`` moves them to the new one)
+
+
+__all__ = ["InertialOdometry", "InertialPrediction", "Preintegrated", "preintegrate", "preintegration_error_bound",
+           "so3_exp", "so3_log"]
