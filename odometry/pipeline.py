@@ -27,7 +27,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -47,7 +47,7 @@ from .icp import NearestCache, RegistrationResult, Source, Target, match, regist
 from .inertial import InertialOdometry
 from .kdtree import KDTree
 from .local_map import LocalMap
-from .poles import PoleMap, Poles
+from .poles import PoleMap
 from .preparation import PreparedScan, prepare_scan
 from .rejectors import Rejector
 from .targets import filtered_scan_target, make_source, map_points, new_local_map
@@ -227,7 +227,7 @@ class Odometry:
         # (poles need the sensor's range image: its rings and azimuth columns)
         self.with_poles = config.poles.enabled and sensor is not None
         self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None,
-                                   pole_map=PoleMap(config.poles.frames_kept) if self.with_poles else None,
+                                   pole_map=self._new_pole_map() if self.with_poles else None,
                                    free_space=FreeSpace(config.dynamic, sensor) if config.dynamic.enabled else None)
         self.diagnostics: list[FrameDiagnostics] = []
         self.inertial = None
@@ -444,7 +444,7 @@ class Odometry:
             points_world = map_points(scan, pose)
             st.local_map.update(points_world, pose[:3, 3], nearest_m=self._map_nearest_m(points_world, alignment))
         if st.pole_map is not None and scan.poles is not None:
-            st.pole_map.add(se3.transform_points(pose, scan.poles.points))
+            st.pole_map.add(se3.transform_points(pose, scan.poles.points), scan.poles.cluttered)
         # (the first scan's motion within its sweep is unknown when it is kept: its free space is not)
         if st.free_space is not None and not (frame.deskewing and len(st.poses) == 1):
             clean = frame.prepared.clean
@@ -510,12 +510,15 @@ class Odometry:
             times = poles.times_s if prepared.deskewing else None
             still = ~st.free_space.moving_points(
                 sensor_frame_points(poles.points, times, period_s, T_world_start, T_guess, measured=True))
-            scan.poles = Poles(poles.points[still], poles.counts[still], None if poles.times_s is None
-                               else poles.times_s[still])
+            scan.poles = replace(poles, points=poles.points[still], counts=poles.counts[still],
+                                 times_s=None if poles.times_s is None else poles.times_s[still])
             scan.counts["moving_poles"] = int((~still).sum())
         prepared.seconds["dynamic"] = time.perf_counter() - t
 
     # ---- what the stages read of the state
+    def _new_pole_map(self) -> PoleMap:
+        return PoleMap(self.config.poles.frames_kept, confirmed_only=self.config.poles.clutter_filter)
+
     def _frame_period(self, stamp_s: float | None) -> float:
         st = self.state
         if stamp_s is not None and st.last_stamp_s is not None and stamp_s > st.last_stamp_s:
@@ -578,8 +581,9 @@ class Odometry:
             st.local_map = new_local_map(cfg, self.sensor)
             st.local_map.update(map_points(st.target_scan, st.poses[0]), st.poses[0][:3, 3])
         if st.pole_map is not None and st.target_scan.poles is not None:
-            st.pole_map = PoleMap(cfg.poles.frames_kept)
-            st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points))
+            st.pole_map = self._new_pole_map()
+            st.pole_map.add(se3.transform_points(st.poses[0], st.target_scan.poles.points),
+                            st.target_scan.poles.cluttered)
 
     def _map_nearest_m(self, points_world: np.ndarray, alignment: Alignment) -> np.ndarray | None:
         """(N,) each world point's distance to its nearest map point, inf beyond the match bound, m: the

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from helpers import box_room, constant_velocity
@@ -138,3 +140,56 @@ def test_a_tiny_suite_runs_and_summarises(tmp_path):
     all_rows = [r for r in rows if r["family"] == "all"]
     assert {(r["kind"], r["method"]) for r in all_rows} == {(k, m) for k in KINDS for m in ("bl", "bl-map")}
     assert all(r["ran"] == 2 and r["sequences"] == 2 for r in all_rows)
+
+
+def test_each_weather_is_read_against_its_clear_twin():
+    """``twin_ratios`` pairs each sequence in a weather with the same sequence in clear air, per method."""
+    from tools.experiments.generalize import twin_ratios, twin_table_markdown
+
+    def result(family, weather, t_err, failed=False):
+        seq = {"family": family, "seed": 1, "sensor": "vlp16", "kind": "real", "weather": weather}
+        return {"sequence": seq, "methods": {"a": {"ok": True, "t_err_pct": t_err, "failed": failed},
+                                             "b": {"ok": False, "note": "not installed"}}}
+
+    results = [result("city", "clear", 0.10), result("city", "snow", 0.12), result("tunnel", "clear", 1.0),
+               result("tunnel", "snow", 20.0, failed=True), result("city", "rain", 0.30)]
+    rows = {(r["weather"], r["method"]): r for r in twin_ratios(results, ("a", "b"))}
+    snow, rain = rows[("snow", "a")], rows[("rain", "a")]
+    assert (snow["pairs"], snow["failures"], snow["over_bound"]) == (2, 1, 1)
+    assert snow["ratio_median"] == pytest.approx((1.2 + 20.0) / 2) and snow["ratio_max"] == pytest.approx(20.0)
+    assert rain["ratio_max"] == pytest.approx(3.0) and rain["over_bound"] == 1
+    assert rows[("snow", "b")]["ran"] == 0
+    table = twin_table_markdown(list(rows.values()), ("a", "b"))
+    assert "1/2 failed" in table and "n/a" in table
+    assert twin_ratios([result("city", None, 0.1)], ("a",)) == []  # no weather: no table
+
+
+def test_a_stopped_run_resumes_from_what_it_finished(tmp_path, monkeypatch):
+    """``resume`` reads a finished sequence back from its poses (the same figures) and runs only the rest."""
+    from tools.experiments import generalize
+    from tools.records import RunRecord
+
+    params = GeneralizeParams(split="tuning", seeds=(TUNING_SEEDS[0],), families=("city",), kinds=("real",),
+                              methods=("bl",), frames=30, segment_lengths_m=(4.0,))
+    record = RunRecord(tmp_path, "generalize", params.to_dict()).start()
+    first = run_generalize(params, record=record)
+    name = first[0]["name"]
+    assert (tmp_path / "poses" / name / "result.json").is_file()
+
+    def no_run(*args, **kwargs):
+        raise AssertionError("a finished sequence ran again")
+
+    monkeypatch.setattr(generalize, "run_sequence_task", no_run)
+    again = run_generalize(params, record=record, resume=True)
+    before, after = first[0]["methods"]["bl"], again[0]["methods"]["bl"]
+    assert np.isfinite(before["t_err_pct"]) and after["t_err_pct"] == pytest.approx(before["t_err_pct"], rel=1e-6)
+    assert after["ate_aligned_m"] == pytest.approx(before["ate_aligned_m"], rel=1e-6)
+    assert after["frames_per_second"] == before["frames_per_second"]
+    np.testing.assert_allclose(again[0]["gt"], first[0]["gt"], atol=1e-8)
+    # a run from before result.json: the figures from the poses, frames/s unknown
+    (tmp_path / "poses" / name / "result.json").unlink()
+    older = run_generalize(params, record=record, resume=True)[0]["methods"]["bl"]
+    assert older["t_err_pct"] == pytest.approx(before["t_err_pct"], rel=1e-6) and np.isnan(older["frames_per_second"])
+    # another frame count, or a method without its poses there: run again
+    assert generalize.finished_result(tmp_path, params.sequences()[0], replace(params, frames=40)) is None
+    assert generalize.finished_result(tmp_path, params.sequences()[0], replace(params, methods=("bl", "ncf"))) is None

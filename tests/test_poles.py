@@ -161,3 +161,97 @@ def test_poles_pin_the_direction_along_a_corridor(kind):
             assert min(d.matches.get("poles", 0) for d in run.diagnostics[1:]) > 20
     assert errors["poles"] < 0.15, errors
     assert errors["without"] > 0.5 * travelled, errors
+
+
+# ---------------------------------------------------------------- weather clutter
+def _labelled_poles(condition: str, family: str, seed: int, clutter_filter: bool):
+    """One scan of a weather-suite sequence: its poles and, per pole, whether its nearest return is a weather
+    return in the truth (fog's backscatter, a raindrop, a snowflake) rather than a surface's."""
+    from scipy.spatial import KDTree
+
+    from tools.family_suite import suite_world, weather_suite
+
+    (spec,) = weather_suite((seed,), 200, (family,), (condition,))
+    world, trajectory, sensor, start_s = suite_world(spec)
+    frame = simulate_in_memory(world, trajectory, sensor, 1, seed=seed, t_start=start_s + 3.0, fields="truth")[0]
+    cfg = variant(DEFAULT_VARIANT)
+    r = np.linalg.norm(frame.points, axis=1)
+    ok = np.isfinite(r) & (r >= cfg.clean.min_range_m) & (r <= cfg.clean.max_range_m)
+    weather = frame.field("weather")  # (absent in clear air)
+    points, weather = frame.points[ok], (np.zeros(len(ok)) if weather is None else weather)[ok] > 0
+    poles = extract_poles(points, frame.ring[ok], sensor.rings, sensor.columns_per_sweep, cfg.poles.max_width_m,
+                          clutter_filter=clutter_filter)
+    _, nearest = KDTree(points).query(poles.points)
+    return poles, weather[nearest]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("condition", ["dense-fog", "snow"])
+@pytest.mark.parametrize("family", ["city", "forest"])
+def test_poles_of_weather_clutter_are_crowded_and_the_structures_stand_clear(family, condition):
+    """Seed 7 is in neither split. Fog's backscatter and snowflakes make near-range "poles" by the thousand; the
+    isolation rule drops nearly all of them and keeps most poles of structure (the truth says which is which).
+    What it leaves is for the pole map's confirmation (the next test)."""
+    every, is_weather = _labelled_poles(condition, family, 7, clutter_filter=False)
+    kept, kept_weather = _labelled_poles(condition, family, 7, clutter_filter=True)
+    assert every.crowded == 0 and not every.cluttered
+    assert kept.cluttered and kept.crowded == len(every) - len(kept)
+    structure, clutter = int((~is_weather).sum()), int(is_weather.sum())
+    assert clutter > 2 * structure and structure > 50  # the failure's cause: clutter outnumbers the poles
+    assert kept_weather.sum() <= 0.1 * clutter
+    assert (~kept_weather).sum() >= 0.6 * structure
+
+
+def test_the_pole_map_targets_only_poles_the_next_or_previous_frame_confirms():
+    posts = np.array([[5.0, 2.0, 0.5], [8.0, -3.0, 0.4], [12.0, 6.0, 0.6]])
+    rng = np.random.default_rng(41)
+    clutter = [rng.uniform(-6, 6, (20, 3)) for _ in range(3)]  # random from frame to frame, as weather's is
+    pole_map = PoleMap(frames_kept=3, confirmed_only=True)
+    pole_map.add(np.vstack([posts, clutter[0]]), cluttered=True)
+    assert len(pole_map.target().points) == len(posts) + 20  # one frame: no neighbour to confirm by
+    for k in (1, 2):
+        pole_map.add(np.vstack([posts + rng.normal(0, 0.03, posts.shape), clutter[k]]), cluttered=True)
+    target = pole_map.target().points
+    # every post seen in each of the three frames, and only the clutter that happened to fall near other clutter
+    d_posts = np.linalg.norm(target[:, None, :2] - posts[None, :, :2], axis=2).min(axis=1)
+    assert (d_posts < 0.2).sum() == 3 * len(posts)
+    lucky = sum(np.any(np.linalg.norm(c[:, None, :2] - o[None, :, :2], axis=2) <= 0.25, axis=1).sum()
+                for i, c in enumerate(clutter) for j, o in enumerate(clutter) if abs(i - j) == 1)
+    assert len(target) - 3 * len(posts) <= lucky
+    unconfirmed = PoleMap(frames_kept=3)
+    for k in range(3):
+        unconfirmed.add(np.vstack([posts, clutter[k]]))
+    assert len(unconfirmed.target().points) == 3 * (len(posts) + 20)
+    clear = PoleMap(frames_kept=3, confirmed_only=True)  # a clear frame's poles are targets at once
+    for k in range(3):
+        clear.add(np.vstack([posts, clutter[k]]), cluttered=False)
+    assert np.array_equal(clear.target().points, unconfirmed.target().points)
+
+
+@pytest.mark.slow
+def test_a_clear_scan_keeps_its_poles_with_the_clutter_filter_on():
+    """The clear twin of a wood (trunks close together: the most crowded clear scans of the tuning seeds) is
+    not cluttered: the filter leaves its poles as they are."""
+    off, _ = _labelled_poles("clear", "forest", 7, clutter_filter=False)
+    on, _ = _labelled_poles("clear", "forest", 7, clutter_filter=True)
+    assert len(off) > 50 and not on.cluttered and on.crowded == 0
+    assert np.array_equal(on.points, off.points)
+
+
+@pytest.mark.parametrize("folder, sensor", [("kitti/sequences/05", "hdl64e"), ("hdl32-pair", "hdl32e")])
+def test_real_streets_are_not_cluttered(real_data, folder, sensor):
+    """Real scans in clear air (an urban KITTI street, a campus with the HDL-32E: up to 0.56 of their poles
+    stand within 0.5 m of another) are not weather: the clutter filter leaves their poles as they are."""
+    from odometry.gcr import ring_of_points
+    from simlidar.dataset import open_sequence
+
+    seq = open_sequence(real_data / folder, sensor=sensor)
+    lidar = load_preset(sensor)
+    for k in range(len(seq)):
+        points = seq[k].points
+        points = points[np.linalg.norm(points, axis=1) > 1.0]  # (the HDL-32E pair's range-0 returns)
+        rings = ring_of_points(points, lidar)
+        off = extract_poles(points, rings, lidar.rings, lidar.columns_per_sweep, 1.2)
+        on = extract_poles(points, rings, lidar.rings, lidar.columns_per_sweep, 1.2, clutter_filter=True)
+        assert len(off) > 50 and not on.cluttered and on.crowded == 0, (folder, k)
+        assert np.array_equal(on.points, off.points)

@@ -116,13 +116,15 @@ def suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[
 
 
 def weather_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES, families: tuple[str, ...] | None = None,
-                  conditions: tuple[str, ...] | None = None) -> list[SuiteSequence]:
-    """The weather suite: the suite's "simulated" sequences for ``seeds``, each in every weather condition
-    (``tools.weather_conditions.CONDITIONS``; "clear" is the others' twin), conditions innermost."""
+                  conditions: tuple[str, ...] | None = None, kinds: tuple[str, ...] = ("simulated",)
+                  ) -> list[SuiteSequence]:
+    """The weather suite: the suite's sequences for ``seeds`` (the "simulated" kind unless ``kinds`` says
+    otherwise), each in every weather condition (``tools.weather_conditions.CONDITIONS``; "clear" is the
+    others' twin), conditions innermost."""
     from tools.weather_conditions import CONDITIONS, check_condition
 
     conditions = tuple(check_condition(c) for c in (conditions or CONDITIONS))
-    return [replace(s, weather=c) for s in suite(seeds, frames, families, ("simulated",)) for c in conditions]
+    return [replace(s, weather=c) for s in suite(seeds, frames, families, kinds) for c in conditions]
 
 
 def traffic_suite(seeds: tuple[int, ...], frames: int = DEFAULT_FRAMES,

@@ -166,6 +166,9 @@ def _add_generalize(sub) -> None:
     p.add_argument("--seeds", help="comma-separated seeds instead of the split's (must not be the other split's)")
     p.add_argument("--families", help="comma-separated families (default all nine)")
     p.add_argument("--kinds", default="simulated,real", help="simulated, real or both (default both)")
+    p.add_argument("--weather", help="comma-separated weather conditions, each sequence in each (clear, light-fog, "
+                   "dense-fog, rain, snow, or all; clear is the others' twin: docs/weather.md); default: the suite "
+                   "as it is, no receiver model")
     p.add_argument("--methods", help="comma-separated: default, bl, ncf, salo, bl-map, ncf-map, salo-map, kiss-icp, "
                    "genz-icp, small-gicp (default: default,bl,ncf,salo and the three peers)")
     p.add_argument("--frames", type=whole_number(20), help="frames per sequence (default 200; --quick 40)")
@@ -175,6 +178,9 @@ def _add_generalize(sub) -> None:
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an odometry parameter for our methods (repeatable), a dotted key: e.g. "
                    "ncf.max_normal_std_deg=3 (salo odometry --keys lists them)")
+    p.add_argument("--resume", action="store_true",
+                   help="read back the sequences a stopped run in --out finished (their poses) and run the rest; "
+                   "with --families narrowed to what finished, it only writes the summary")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     p.set_defaults(func=cmd_generalize)
 
@@ -364,6 +370,14 @@ def _csv(text: str | None) -> tuple[str, ...]:
     return tuple(t.strip() for t in (text or "").split(",") if t.strip())
 
 
+def _weather_conditions(text: str | None) -> tuple[str, ...]:
+    """--weather's conditions ("all": every one); each checked (ValueError)."""
+    from tools.weather_conditions import CONDITIONS, check_condition
+
+    names = _csv(text)
+    return CONDITIONS if names == ("all",) else tuple(check_condition(c) for c in names)
+
+
 def cmd_generalize(args) -> int:
     from tools.experiments.generalize import (
         DEFAULT_FRAMES,
@@ -390,6 +404,7 @@ def cmd_generalize(args) -> int:
             methods=_csv(args.methods) or (("default", "bl", "kiss-icp") if quick else DEFAULT_METHODS),
             frames=args.frames or (40 if quick else DEFAULT_FRAMES),
             config_overrides=_config_overrides(args.config_set),
+            weather=_weather_conditions(args.weather),
             **({"segment_lengths_m": (10.0, 20.0)} if quick else {}),
         )
         params.sequences()  # unknown families fail here, before anything is written
@@ -397,7 +412,8 @@ def cmd_generalize(args) -> int:
         raise CommandError(str(exc)) from None
     out = args.out or DEFAULT_ROOT / f"generalize-{args.split}"
     record = RunRecord(out, "generalize", params.to_dict(), command_line()).start()
-    results = run_generalize(params, record=record, workers=args.workers, progress=args.progress)
+    results = run_generalize(params, record=record, workers=args.workers, progress=args.progress,
+                             resume=args.resume)
     rows = write_generalize(results, params, record)
     for r in rows:
         if r["family"] == "all":

@@ -23,6 +23,7 @@ import logging
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -37,6 +38,7 @@ from tools.family_suite import (
     simulate,
     suite,
     trajectory_figures,
+    weather_suite,
 )
 from tools.records import RunRecord, fmt, markdown_table, write_csv, write_json
 from tools.runners import MethodRun
@@ -104,8 +106,9 @@ def run_sequence_task(seq: SuiteSequence, methods: tuple[str, ...], overrides: d
 @dataclass(frozen=True)
 class GeneralizeParams:
     """split: "tuning" or "evaluation" (or explicit ``seeds``). families, kinds, methods, frames:
-    what runs. config_overrides: odometry parameters changed for every one of our methods, nested by
-    stage as in YAML."""
+    what runs. weather: conditions of ``tools.weather_conditions`` (each sequence in each, "clear" its
+    twin); empty: the suite as it is, without a receiver model. config_overrides: odometry parameters
+    changed for every one of our methods, nested by stage as in YAML."""
 
     split: str = "evaluation"
     seeds: tuple[int, ...] = ()
@@ -115,6 +118,7 @@ class GeneralizeParams:
     frames: int = DEFAULT_FRAMES
     config_overrides: dict = field(default_factory=dict)
     segment_lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M
+    weather: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.split not in SPLITS and not self.seeds:
@@ -135,7 +139,10 @@ class GeneralizeParams:
         return tuple(self.seeds) or SPLITS[self.split]
 
     def sequences(self) -> list[SuiteSequence]:
-        return suite(self.seed_list, self.frames, tuple(self.families) or None, tuple(self.kinds))
+        families = tuple(self.families) or None
+        if self.weather:
+            return weather_suite(self.seed_list, self.frames, families, tuple(self.weather), tuple(self.kinds))
+        return suite(self.seed_list, self.frames, families, tuple(self.kinds))
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -145,14 +152,23 @@ class GeneralizeParams:
 
 
 def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, workers: int = 1,
-                   progress: bool = False) -> list[dict]:
-    """Run the suite, ``workers`` sequences at a time; with ``record``, write each sequence's poses as it ends."""
+                   progress: bool = False, resume: bool = False) -> list[dict]:
+    """Run the suite, ``workers`` sequences at a time; with ``record``, write each sequence's poses as it ends.
+    resume: a sequence a stopped run in ``record``'s folder finished is read back (``finished_result``), not run."""
     from tqdm import tqdm
 
     seqs = params.sequences()
     overrides = dict(params.config_overrides)
     results = []
     bar = tqdm(total=len(seqs), unit="sequence", desc="generalize", disable=not progress, dynamic_ncols=True)
+    if resume and record is not None:
+        finished = [finished_result(record.out_dir, seq, params) for seq in seqs]
+        results = [r for r in finished if r is not None]
+        seqs_to_run = [s for s, r in zip(seqs, finished, strict=True) if r is None]
+        bar.update(len(results))
+        log.info("resumed %d finished sequences, %d to run", len(results), len(seqs_to_run))
+    else:
+        seqs_to_run = seqs
 
     def done(res: dict) -> None:
         results.append(res)
@@ -162,7 +178,7 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
         bar.set_postfix_str(res["name"])
 
     if workers <= 1:
-        for seq in seqs:
+        for seq in seqs_to_run:
             done(run_sequence_task(seq, params.methods, overrides, params.segment_lengths_m))
     else:
         from concurrent.futures import as_completed
@@ -171,7 +187,7 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
 
         with spawned_pool(workers) as pool:
             futures = [pool.submit(run_sequence_task, seq, params.methods, overrides, params.segment_lengths_m)
-                       for seq in seqs]
+                       for seq in seqs_to_run]
             for f in as_completed(futures):
                 done(f.result())
     bar.close()
@@ -180,6 +196,8 @@ def run_generalize(params: GeneralizeParams, record: RunRecord | None = None, wo
 
 
 def _write_poses(record: RunRecord, res: dict) -> None:
+    """A finished sequence's poses (gt.txt, METHOD.txt) and, last, its result.json (without the poses): what
+    ``finished_result`` reads back."""
     from simlidar.formats.kitti import write_kitti_poses
 
     if "gt" in res:
@@ -187,6 +205,43 @@ def _write_poses(record: RunRecord, res: dict) -> None:
     for m, r in res["methods"].items():
         if r.get("poses") is not None:
             write_kitti_poses(record.path(f"poses/{res['name']}/{m}.txt"), r["poses"])
+    write_json(record.path(f"poses/{res['name']}/result.json"), {k: v for k, v in res.items() if k != "gt"} | {
+        "methods": {m: {k: v for k, v in x.items() if k != "poses"} for m, x in res["methods"].items()}})
+
+
+def finished_result(folder: Path, seq: SuiteSequence, params: GeneralizeParams) -> dict | None:
+    """The result of a sequence a stopped run in ``folder`` finished, as ``run_sequence_task`` returns it, or None
+    (not finished, another frame count, or a method asked for now without its run there). The figures are
+    computed again from the poses (``params``' segments); frames/s, flags and notes come from its result.json,
+    which a run before it was written lacks (frames/s then unknown: nan)."""
+    import json
+
+    from simlidar.formats.kitti import read_kitti_poses
+
+    d = Path(folder) / "poses" / seq.name
+    if not (d / "gt.txt").is_file():
+        return None
+    gt = read_kitti_poses(d / "gt.txt")
+    saved = json.loads((d / "result.json").read_text()) if (d / "result.json").is_file() else None
+    if len(gt) != params.frames or (saved is not None and saved.get("error")):
+        return None
+    saved_methods = (saved or {}).get("methods", {})
+    res = saved or {"sequence": asdict(seq), "name": seq.name}
+    res["methods"], res["gt"] = {}, gt
+    for m in params.methods:
+        before = saved_methods.get(m)
+        if before is not None and not before.get("ok"):
+            res["methods"][m] = before  # (a peer not installed, a method that failed: as it was)
+            continue
+        if not (d / f"{m}.txt").is_file():
+            return None
+        x = {"ok": True, "note": "read back from its poses", "frames_per_second": float("nan"), "flags": {}}
+        x.update({k: before[k] for k in ("note", "frames_per_second", "flags") if before and k in before})
+        x["poses"] = read_kitti_poses(d / f"{m}.txt")
+        x.update(trajectory_figures(gt, x["poses"], params.segment_lengths_m))
+        x["failed"] = bool(x["diverged"] or x["t_err_pct"] > FAILURE_T_ERR_PCT)
+        res["methods"][m] = x
+    return res
 
 
 # ---------------------------------------------------------------- summaries
@@ -200,8 +255,9 @@ def summarize(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
     groups: dict[tuple[str, str], list[dict]] = {}
     for r in results:
         s = r["sequence"]
-        groups.setdefault((s["family"], s["kind"]), []).append(r)
-        groups.setdefault(("all", s["kind"]), []).append(r)
+        kind = s["kind"] if not s.get("weather") else f"{s['kind']}, {s['weather']}"
+        groups.setdefault((s["family"], kind), []).append(r)
+        groups.setdefault(("all", kind), []).append(r)
     for (family, kind), rs in groups.items():
         for m in methods:
             runs = [r["methods"].get(m, {}) for r in rs]
@@ -218,6 +274,59 @@ def summarize(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
                 row[f"{f}_std"] = float(v.std()) if len(v) else float("nan")
             rows.append(row)
     return rows
+
+
+# The bound a weather's t_err is held to against its clear twin's (issue "Weather": light fog and rain).
+TWIN_RATIO_BOUND = 1.5
+
+
+def twin_ratios(results: list[dict], methods: tuple[str, ...]) -> list[dict]:
+    """Per (weather condition, method): each sequence's t_err against its clear twin's (the same sequence,
+    weather "clear"): the median and largest ratio over the sequences, how many exceed ``TWIN_RATIO_BOUND``,
+    and the failures in the weather. Empty without a clear twin."""
+    def twin_key(seq: dict) -> tuple:
+        return tuple(sorted((k, str(v)) for k, v in seq.items() if k != "weather"))
+
+    clear = {twin_key(r["sequence"]): r for r in results if r["sequence"].get("weather") == "clear"}
+    rows = []
+    conditions = dict.fromkeys(r["sequence"]["weather"] for r in results
+                               if r["sequence"].get("weather") not in (None, "clear"))
+    for cond in conditions:
+        pairs = [(r, clear.get(twin_key(r["sequence"]))) for r in results if r["sequence"].get("weather") == cond]
+        for m in methods:
+            ratios, failures, ran = [], 0, 0
+            for r, twin in pairs:
+                x, y = r["methods"].get(m, {}), (twin or {}).get("methods", {}).get(m, {})
+                if not x.get("ok"):
+                    continue
+                ran += 1
+                failures += bool(x.get("failed"))
+                a, b = x.get("t_err_pct"), y.get("t_err_pct") if y.get("ok") else None
+                if a is not None and b is not None and math.isfinite(a) and math.isfinite(b) and b > 0:
+                    ratios.append(a / b)
+            rows.append({"weather": cond, "method": m, "ran": ran, "failures": failures, "pairs": len(ratios),
+                         "ratio_median": float(np.median(ratios)) if ratios else float("nan"),
+                         "ratio_max": float(max(ratios)) if ratios else float("nan"),
+                         "over_bound": sum(v > TWIN_RATIO_BOUND for v in ratios)})
+    return rows
+
+
+def twin_table_markdown(rows: list[dict], methods: tuple[str, ...]) -> str:
+    """Rows per weather condition, a column per method: median / largest ratio to the clear twin's t_err,
+    (sequences over the bound), failures."""
+    by = {(r["weather"], r["method"]): r for r in rows}
+    out = []
+    for cond in dict.fromkeys(r["weather"] for r in rows):
+        cells = []
+        for m in methods:
+            r = by[(cond, m)]
+            cell = (f"{fmt(r['ratio_median'], '.2f')} / {fmt(r['ratio_max'], '.2f')} "
+                    f"({r['over_bound']}/{r['pairs']} over {TWIN_RATIO_BOUND:g}x)") if r["pairs"] else "n/a"
+            if r["failures"]:
+                cell += f", {r['failures']}/{r['ran']} failed"
+            cells.append(cell)
+        out.append([cond, *cells])
+    return markdown_table(["weather", *(method_label(m) for m in methods)], out)
 
 
 def method_label(m: str) -> str:
@@ -267,7 +376,8 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
             per_seq.append({"sequence": r["name"], **r["sequence"], "method": m,
                             "t_eig0_median": r.get("t_eig0_median"),
                             **{k: v for k, v in x.items() if k not in ("poses", "flags")}, **x.get("flags", {})})
-    cols = ["sequence", "family", "seed", "sensor", "kind", "frames", "noise_std_m", "start_s", "t_eig0_median",
+    cols = ["sequence", "family", "seed", "sensor", "kind", "weather", "frames", "noise_std_m", "start_s",
+            "t_eig0_median",
             "method", "ok", "note", "t_err_pct", "r_err_deg_per_100m", "vertical_drift_pct", "ate_aligned_m",
             "rpe_t_cm", "rpe_r_deg", "path_length_m", "failed", "frames_per_second", "extrapolated", "degenerate",
             "remapped_frames"]
@@ -276,6 +386,7 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
               + [f"{f}_{s}" for f in FIGURES for s in ("mean", "std")])
     write_json(record.path("results.json"), {
         "experiment": "generalize", "params": params.to_dict(), "summary": rows,
+        "weather_against_clear": twin_ratios(results, methods),
         "sequences": [{k: v for k, v in r.items() if k != "gt"} | {"methods": {
             m: {k: v for k, v in x.items() if k != "poses"} for m, x in r["methods"].items()}} for r in results],
     })
@@ -299,6 +410,12 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
                                 ("vertical_drift_pct", "vertical drift |dz| / distance, %", ".2f"),
                                 ("frames_per_second", "frames / s", ".1f")):
         lines += [f"## {title}", "", table_markdown(rows, methods, figure, spec), ""]
+    twins = twin_ratios(results, methods)
+    if twins:
+        lines += ["## Each weather against its clear twin", "",
+                  "Per sequence, t_err in the weather / t_err of the same sequence in clear air: median / largest "
+                  f"over the sequences (how many above {TWIN_RATIO_BOUND:g}x), and failures in the weather.", "",
+                  twin_table_markdown(twins, methods), ""]
     for r in errors:
         lines.append(f"- {r['name']}: not simulated ({r['error']})")
     unavailable = {m: x["note"] for r in results for m, x in r["methods"].items() if not x.get("ok")}
