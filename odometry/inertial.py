@@ -74,22 +74,6 @@ class Preintegrated:
         return self.dv + self.dv_dba @ d, self.dp + self.dp_dba @ d
 
 
-def so3_exp(w: np.ndarray) -> np.ndarray:
-    """(3, 3) ``Exp`` of a (3,) rotation vector, rad (Rodrigues)."""
-    theta = math.sqrt(float(w @ w))
-    K = se3.hat(w)
-    if theta < 1e-8:
-        return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + math.sin(theta) / theta * K + (1.0 - math.cos(theta)) / theta**2 * K @ K
-
-
-def so3_log(R: np.ndarray) -> np.ndarray:
-    """(3,) rotation vector of a (3, 3) rotation, rad."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    return se3.log(T)[3:]
-
-
 def preintegrate(samples: ImuSamples, t0: float, t1: float, gyro_bias: np.ndarray, accel_bias: np.ndarray
                  ) -> Preintegrated | None:
     """Forster's preintegration (module doc) of ``samples`` over the IMU times [t0, t1], s; None when the
@@ -109,12 +93,12 @@ def preintegrate(samples: ImuSamples, t0: float, t1: float, gyro_bias: np.ndarra
     for k in range(len(times) - 1):
         h = times[k + 1] - times[k]
         w_mean, a_mean = 0.5 * (wk[k] + wk[k + 1]), 0.5 * (ak[k] + ak[k + 1])
-        R_mid = dR @ so3_exp(0.5 * h * w_mean)
+        R_mid = dR @ se3.rotation_of_rotvec(0.5 * h * w_mean)
         dp = dp + dv * h + 0.5 * (R_mid @ a_mean) * h * h
         dp_dba = dp_dba + dv_dba * h - 0.5 * R_mid * h * h
         dv = dv + (R_mid @ a_mean) * h
         dv_dba = dv_dba - R_mid * h
-        dR = dR @ so3_exp(h * w_mean)
+        dR = dR @ se3.rotation_of_rotvec(h * w_mean)
     return Preintegrated(float(t1 - t0), dR, dv, dp, dv_dba, dp_dba, np.array(gyro_bias, dtype=float),
                          np.array(accel_bias, dtype=float))
 
@@ -278,7 +262,7 @@ class InertialOdometry:
                 continue
             R_a, R_b = a.pose[:3, :3] @ self.T_lidar_imu[:3, :3], b.pose[:3, :3] @ self.T_lidar_imu[:3, :3]
             seg = b.segment
-            said = seg.gyro_bias - so3_log(seg.dR.T @ (R_a.T @ R_b)) / seg.dt_s
+            said = seg.gyro_bias - se3.rotvec_of_rotation(seg.dR.T @ (R_a.T @ R_b)) / seg.dt_s
             weight = seg.dt_s**2 / rot_var
             info, total = info + weight, total + weight * said
         self.gyro_bias = total / info
@@ -375,5 +359,4 @@ class InertialOdometry:
         # (the segments keep the bias they were integrated with: ``corrected`` moves them to the new one)
 
 
-__all__ = ["InertialOdometry", "InertialPrediction", "Preintegrated", "preintegrate", "preintegration_error_bound",
-           "so3_exp", "so3_log"]
+__all__ = ["InertialOdometry", "InertialPrediction", "Preintegrated", "preintegrate", "preintegration_error_bound"]

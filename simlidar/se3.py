@@ -68,7 +68,7 @@ def _v_matrix(omega: np.ndarray) -> np.ndarray:
     return np.eye(3) + a * W + b * W2
 
 
-def _rotation_of_rotvec(omega: np.ndarray) -> np.ndarray:
+def rotation_of_rotvec(omega: np.ndarray) -> np.ndarray:
     """(3,) rotation vector -> (3, 3) rotation (Rodrigues).
 
     One transform at a time (the odometry's per-iteration updates), scipy's ``Rotation``
@@ -95,11 +95,11 @@ def _jacobian_coefficients(omega: np.ndarray) -> tuple[float, float, float]:
     return math.sin(t) / t, (1.0 - math.cos(t)) / t2, (t - math.sin(t)) / (t2 * t)
 
 
-def _rotvec_of_rotation(R: np.ndarray) -> np.ndarray:
+def rotvec_of_rotation(R: np.ndarray) -> np.ndarray:
     """(3, 3) rotation -> (3,) rotation vector, through the unit quaternion (stable at every angle).
 
     The quaternion's largest component is computed first (Shepperd's method), the others from
-    it; then ``omega = 2 atan2(|v|, w) v / |v|``. One matrix at a time, as ``_rotation_of_rotvec``.
+    it; then ``omega = 2 atan2(|v|, w) v / |v|``. One matrix at a time, as ``rotation_of_rotvec``.
     """
     m = R.tolist()
     diag = (m[0][0], m[1][1], m[2][2])
@@ -134,7 +134,7 @@ def exp(xi: np.ndarray) -> np.ndarray:
     xi = np.asarray(xi, dtype=float)
     rho, omega = xi[..., :3], xi[..., 3:]
     if xi.shape == (6,):
-        return make(_rotation_of_rotvec(omega), _v_matrix_of(omega) @ rho)
+        return make(rotation_of_rotvec(omega), _v_matrix_of(omega) @ rho)
     from scipy.spatial.transform import Rotation  # (not at import: scipy.spatial is most of a short run's start-up)
 
     R = Rotation.from_rotvec(omega.reshape(-1, 3)).as_matrix().reshape(omega.shape[:-1] + (3, 3))
@@ -146,7 +146,7 @@ def log(T: np.ndarray) -> np.ndarray:
     """(..., 4, 4) transforms -> (..., 6) twists (rho, omega)."""
     T = np.asarray(T, dtype=float)
     if T.shape == (4, 4):
-        omega = _rotvec_of_rotation(T[:3, :3])
+        omega = rotvec_of_rotation(T[:3, :3])
         return np.concatenate([np.linalg.solve(_v_matrix_of(omega), T[:3, 3]), omega])
     R = T[..., :3, :3]
     from scipy.spatial.transform import Rotation
