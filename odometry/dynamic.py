@@ -24,7 +24,6 @@ scan saw (it came out from behind something); both stay in.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -55,12 +54,6 @@ class FreeSpaceImage:
     column_time_fraction: np.ndarray
     T_world_start: np.ndarray
     xi: np.ndarray
-
-
-def azimuth_columns(points: np.ndarray, columns: int) -> np.ndarray:
-    """(N, 3) points in a sensor frame -> (N,) int azimuth column in [0, columns)."""
-    az = np.arctan2(points[:, 1], points[:, 0])
-    return np.minimum(((az + math.pi) * (columns / (2 * math.pi))).astype(np.int64), columns - 1)
 
 
 def checked_lags(history_frames: int) -> tuple[int, ...]:
@@ -178,4 +171,4 @@ def drop_rows(scan: FilteredScan, keep_points: np.ndarray, keep_centroids: np.nd
         scan.centroid_times_s = scan.centroid_times_s.take(rows)
 
 
-__all__ = ["FreeSpace", "FreeSpaceImage", "azimuth_columns", "checked_lags", "drop_rows", "sensor_frame_points"]
+__all__ = ["FreeSpace", "FreeSpaceImage", "checked_lags", "drop_rows", "sensor_frame_points"]
