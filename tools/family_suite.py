@@ -64,7 +64,9 @@ class SuiteSequence:
     noise_std_m: range noise (1 sigma), m. start_s: time along the path of the first sweep, s
     (families in ``PLACED_START``: None, the start is placed by a feature of the path). weather: a
     condition of ``tools.weather_conditions`` (the weather suite), None without. traffic: with the
-    family's moving traffic (the traffic suite; ``scenes.traffic``), else its static twin.
+    family's moving traffic (the traffic suite; ``scenes.traffic``), else its static twin. imu: an IMU
+    grade of ``simlidar.imu.IMU_GRADES`` riding with the lidar (its own noise stream: the lidar's
+    returns are those without it), None without.
     """
 
     family: str
@@ -76,6 +78,7 @@ class SuiteSequence:
     start_s: float | None
     weather: str | None = None
     traffic: bool = False
+    imu: str | None = None
 
     @property
     def name(self) -> str:
@@ -154,6 +157,10 @@ def suite_world(seq: SuiteSequence):
         from tools.weather_conditions import sensor_in
 
         sensor = sensor_in(sensor, seq.weather, seq.family, seq.seed)
+    if seq.imu is not None:
+        from simlidar.imu import imu_of_grade
+
+        sensor = sensor.with_overrides(imu=imu_of_grade(seq.imu, sensor.imu))
     span = seq.frames * sensor.sweep_period_s
     start = seq.start_s
     if start is None:

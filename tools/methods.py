@@ -64,7 +64,8 @@ PLACEHOLDERS = {
 INPUT_PLACEHOLDERS = ("scans", "sequence")
 # Table and plot labels of the built-in methods.
 LABELS = {"default": "default", "bl": "BL", "ncf": "NCF", "salo": "SALO", "bl-map": "BL map", "ncf-map": "NCF map",
-          "salo-map": "SALO map", "kiss-icp": "KISS-ICP", "genz-icp": "GenZ-ICP", "small-gicp": "small_gicp s2m"}
+          "salo-map": "SALO map", "default-imu": "default + IMU",
+          "kiss-icp": "KISS-ICP", "genz-icp": "GenZ-ICP", "small-gicp": "small_gicp s2m"}
 
 
 def method_label(name: str) -> str:

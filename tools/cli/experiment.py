@@ -178,6 +178,9 @@ def _add_generalize(sub) -> None:
     p.add_argument("--set", dest="config_set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an odometry parameter for our methods (repeatable), a dotted key: e.g. "
                    "ncf.max_normal_std_deg=3 (salo odometry --keys lists them)")
+    p.add_argument("--imu", metavar="GRADE", help="give every sequence an IMU of this grade (consumer, tactical: "
+                   "docs/imu.md; the lidar's frames are those without it) and run the default with it too "
+                   "(method default-imu)")
     p.add_argument("--resume", action="store_true",
                    help="read back the sequences a stopped run in --out finished (their poses) and run the rest; "
                    "with --families narrowed to what finished, it only writes the summary")
@@ -382,6 +385,7 @@ def cmd_generalize(args) -> int:
     from tools.experiments.generalize import (
         DEFAULT_FRAMES,
         DEFAULT_METHODS,
+        IMU_METHOD,
         SPLITS,
         GeneralizeParams,
         method_label,
@@ -395,16 +399,20 @@ def cmd_generalize(args) -> int:
     except ValueError:
         raise CommandError(f"--seeds {args.seeds!r}: expected whole numbers, e.g. 1,2") from None
     quick = args.quick
+    methods = _csv(args.methods) or (("default", "bl", "kiss-icp") if quick else DEFAULT_METHODS)
+    if args.imu and IMU_METHOD not in methods:
+        methods = (*methods, IMU_METHOD)
     try:
         params = GeneralizeParams(
             split=args.split,
             seeds=seeds or ((SPLITS[args.split][0],) if quick else ()),
             families=_csv(args.families) or (("city", "canyon") if quick else ()),
             kinds=_csv(args.kinds),
-            methods=_csv(args.methods) or (("default", "bl", "kiss-icp") if quick else DEFAULT_METHODS),
+            methods=tuple(methods),
             frames=args.frames or (40 if quick else DEFAULT_FRAMES),
             config_overrides=_config_overrides(args.config_set),
             weather=_weather_conditions(args.weather),
+            imu=args.imu,
             **({"segment_lengths_m": (10.0, 20.0)} if quick else {}),
         )
         params.sequences()  # unknown families fail here, before anything is written

@@ -7,6 +7,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
+from simlidar.imu import IMU_GRADES, imu_of_grade
 from simlidar.sensor import load_sensor, preset_names
 
 from .common import CommandError, parse_overrides, progress_bar, real_number, split_seed, whole_number
@@ -70,9 +71,10 @@ def add_commands(sub) -> None:
         action="store_false",
         help="fire every ray of a sweep from the sweep's start pose",
     )
-    p.add_argument("--imu", action="store_true",
+    p.add_argument("--imu", nargs="?", const="sensor", choices=("sensor", *IMU_GRADES), metavar="GRADE",
                    help="simulate the sensor's IMU too (imu.csv, imu_truth.csv; its keys from the sensor file's imu "
-                   "section, else the defaults: docs/imu.md); along a scene's path only")
+                   f"section, else the defaults: docs/imu.md), or one of a grade ({', '.join(IMU_GRADES)}: its noise "
+                   "keys, the file's mounting); along a scene's path only")
     p.add_argument("--compress-truth", action="store_true",
                    help="zlib the per-return truth files: a third of their size, slower to write")
     p.add_argument("--out", type=Path, required=True, help="output sequence folder")
@@ -87,8 +89,10 @@ def _sensor_from_args(args):
     sensor = load_sensor(args.sensor)
     if getattr(args, "noise_std", None) is not None:
         sensor = sensor.with_overrides(range_noise_std_m=args.noise_std)
-    if getattr(args, "imu", False):
+    if getattr(args, "imu", None) == "sensor":
         sensor = sensor.with_overrides(imu=dataclasses.replace(sensor.imu, enabled=True))
+    elif getattr(args, "imu", None):
+        sensor = sensor.with_overrides(imu=imu_of_grade(args.imu, sensor.imu))
     if getattr(args, "sensor_set", None):
         try:
             values = schema(LidarModel).read(assignments(args.sensor_set, "--sensor-set"), "--sensor-set",

@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +45,9 @@ from tools.runners import MethodRun
 
 log = logging.getLogger(__name__)
 
-OUR_METHODS = ("default", "bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map")
+# "default-imu": the default with ``imu.enabled`` (the suite's sequences given an IMU: ``--imu GRADE``).
+IMU_METHOD = "default-imu"
+OUR_METHODS = ("default", "bl", "ncf", "salo", "bl-map", "ncf-map", "salo-map", IMU_METHOD)
 PEER_METHODS = ("kiss-icp", "genz-icp", "small-gicp")
 DEFAULT_METHODS = ("default", "bl", "ncf", "salo", *PEER_METHODS)
 
@@ -55,6 +57,8 @@ def odometry_config(method: str, overrides: dict):
     """The odometry config a method name stands for (``default``: what ``salo odometry`` uses)."""
     from tools.methods import our_config
 
+    if method == IMU_METHOD:
+        return our_config("default").replace(**overrides).replace(imu={"enabled": True})
     return our_config(method).replace(**overrides)
 
 
@@ -63,9 +67,7 @@ def run_one(method: str, sequence, overrides: dict) -> MethodRun:
     no poses, no truth); a peer that is missing or fails gives a run without poses whose ``error`` says why."""
     from tools.methods import OursMethod, method_from_name, run_method
 
-    m = method_from_name(method)
-    if isinstance(m, OursMethod):
-        m = OursMethod(method, odometry_config(method, overrides))
+    m = OursMethod(method, odometry_config(method, overrides)) if method in OUR_METHODS else method_from_name(method)
     return run_method(m, sequence, keep_failures=True)
 
 
@@ -108,7 +110,9 @@ class GeneralizeParams:
     """split: "tuning" or "evaluation" (or explicit ``seeds``). families, kinds, methods, frames:
     what runs. weather: conditions of ``tools.weather_conditions`` (each sequence in each, "clear" its
     twin); empty: the suite as it is, without a receiver model. config_overrides: odometry parameters
-    changed for every one of our methods, nested by stage as in YAML."""
+    changed for every one of our methods, nested by stage as in YAML. imu: an IMU grade
+    (``simlidar.imu.IMU_GRADES``) given to every sequence (the lidar's frames are the same without it),
+    which ``default-imu`` uses; None: no IMU."""
 
     split: str = "evaluation"
     seeds: tuple[int, ...] = ()
@@ -119,8 +123,16 @@ class GeneralizeParams:
     config_overrides: dict = field(default_factory=dict)
     segment_lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M
     weather: tuple[str, ...] = ()
+    imu: str | None = None
 
     def __post_init__(self) -> None:
+        from simlidar.imu import IMU_GRADES
+
+        if self.imu is not None and self.imu not in IMU_GRADES:
+            raise ValueError(f"unknown IMU grade {self.imu!r} (known: {', '.join(IMU_GRADES)})")
+        if IMU_METHOD in self.methods and self.imu is None:
+            raise ValueError(f"method {IMU_METHOD} needs sequences with an IMU: give an IMU grade "
+                             f"({', '.join(IMU_GRADES)})")
         if self.split not in SPLITS and not self.seeds:
             raise ValueError(f"split must be one of {', '.join(SPLITS)} (or give seeds), got {self.split!r}")
         if self.seeds and self.split in SPLITS:
@@ -141,8 +153,10 @@ class GeneralizeParams:
     def sequences(self) -> list[SuiteSequence]:
         families = tuple(self.families) or None
         if self.weather:
-            return weather_suite(self.seed_list, self.frames, families, tuple(self.weather), tuple(self.kinds))
-        return suite(self.seed_list, self.frames, families, tuple(self.kinds))
+            seqs = weather_suite(self.seed_list, self.frames, families, tuple(self.weather), tuple(self.kinds))
+        else:
+            seqs = suite(self.seed_list, self.frames, families, tuple(self.kinds))
+        return seqs if self.imu is None else [replace(s, imu=self.imu) for s in seqs]
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -329,6 +343,29 @@ def twin_table_markdown(rows: list[dict], methods: tuple[str, ...]) -> str:
     return markdown_table(["weather", *(method_label(m) for m in methods)], out)
 
 
+def imu_against_lidar_only(results: list[dict]) -> list[dict]:
+    """Per kind (and "all"): each sequence's t_err with the IMU (``default-imu``) against the default's on
+    the same frames: the median and largest ratio, the sequence of the largest, failures of each. Empty
+    when no result has both runs."""
+    groups: dict[str, list[tuple[str, float, float, bool, bool]]] = {}
+    for r in results:
+        a, b = r["methods"].get("default", {}), r["methods"].get(IMU_METHOD, {})
+        if not (a.get("ok") and b.get("ok")):
+            continue
+        pair = (r["name"], a["t_err_pct"], b["t_err_pct"], bool(a["failed"]), bool(b["failed"]))
+        groups.setdefault(r["sequence"]["kind"], []).append(pair)
+        groups.setdefault("all", []).append(pair)
+    rows = []
+    for kind, pairs in groups.items():
+        ratios = np.array([w / max(wo, 1e-9) for _, wo, w, _, _ in pairs])
+        worst = int(np.argmax(ratios))
+        rows.append({"kind": kind, "sequences": len(pairs), "ratio_median": float(np.median(ratios)),
+                     "ratio_max": float(ratios[worst]), "worst": pairs[worst][0],
+                     "worst_t_err_pct": (pairs[worst][1], pairs[worst][2]),
+                     "failures_lidar_only": sum(p[3] for p in pairs), "failures_with_imu": sum(p[4] for p in pairs)})
+    return rows
+
+
 def method_label(m: str) -> str:
     from tools.methods import method_label as label
 
@@ -387,6 +424,7 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
     write_json(record.path("results.json"), {
         "experiment": "generalize", "params": params.to_dict(), "summary": rows,
         "weather_against_clear": twin_ratios(results, methods),
+        "imu_against_lidar_only": imu_against_lidar_only(results),
         "sequences": [{k: v for k, v in r.items() if k != "gt"} | {"methods": {
             m: {k: v for k, v in x.items() if k != "poses"} for m, x in r["methods"].items()}} for r in results],
     })
@@ -416,6 +454,17 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
                   "Per sequence, t_err in the weather / t_err of the same sequence in clear air: median / largest "
                   f"over the sequences (how many above {TWIN_RATIO_BOUND:g}x), and failures in the weather.", "",
                   twin_table_markdown(twins, methods), ""]
+    with_imu = imu_against_lidar_only(results)
+    if with_imu:
+        lines += [f"## The default with the IMU ({params.imu} grade) against lidar only", "",
+                  "Per sequence, t_err with the IMU / t_err lidar only, on the same frames: median and largest over "
+                  "the sequences, and the sequence of the largest (its t_err lidar only, with the IMU).", "",
+                  markdown_table(["kind", "sequences", "median", "largest", "where (lidar only, with IMU, %)",
+                                  "failures lidar only", "failures with IMU"],
+                                 [[r["kind"], r["sequences"], fmt(r["ratio_median"], ".2f"), fmt(r["ratio_max"], ".2f"),
+                                   f"{r['worst']} ({fmt(r['worst_t_err_pct'][0], '.3f')}, "
+                                   f"{fmt(r['worst_t_err_pct'][1], '.3f')})",
+                                   r["failures_lidar_only"], r["failures_with_imu"]] for r in with_imu]), ""]
     for r in errors:
         lines.append(f"- {r['name']}: not simulated ({r['error']})")
     unavailable = {m: x["note"] for r in results for m, x in r["methods"].items() if not x.get("ok")}
