@@ -1,8 +1,10 @@
 """The default odometry with and without the IMU, against the truth, over sequences that have one.
 
     python -m tools.imu_odometry SEQUENCE [SEQUENCE ...] [--variant salo-map] [--frames A:B]
+                                 [--lidar-only bl,ncf,salo,kiss-icp,genz-icp,small-gicp]
 
-Runs the variant lidar-only and with ``imu.enabled=true`` on each simulated sequence folder
+Runs the variant lidar-only and with ``imu.enabled=true`` on each simulated sequence folder, and
+the ``--lidar-only`` methods (ours or the peers, by ``tools.methods`` name) lidar-only on the first
 (through ``tools.methods.run_method``: the method gets the staged copy, scans, times, the sensor
 file and ``imu.csv``, never the truth), and prints per run: the KITTI t_err (%), the ATE (m, RMSE,
 unaligned: both start at the identity) and the error over the weak stretch: the longest run of
@@ -77,12 +79,14 @@ def weak_stretch(sequence_path: Path, frames: np.ndarray):
     return best[0], best[1], d.mean(axis=0)
 
 
-def measure(path: Path, variant: str, frames: slice | None) -> list[tuple[str, dict]]:
-    """Lidar-only and with the IMU on one sequence folder: (label, figures) each."""
+def measure(path: Path, variant: str, frames: slice | None, lidar_only: tuple[str, ...] = ()
+            ) -> list[tuple[str, dict]]:
+    """Lidar-only and with the IMU on one sequence folder, then each of ``lidar_only``'s methods (names of
+    ``tools.methods``; their IMU unused): (label, figures) each."""
     from odometry.config import variant as variant_config
     from odometry.metrics import evaluate_trajectory
     from simlidar.dataset import open_sequence
-    from tools.methods import OursMethod, run_method
+    from tools.methods import OursMethod, method_from_name, method_label, run_method
 
     seq = open_sequence(path)
     if getattr(seq, "imu", None) is None:
@@ -92,12 +96,18 @@ def measure(path: Path, variant: str, frames: slice | None) -> list[tuple[str, d
     T_gt = np.linalg.inv(T_gt[0]) @ T_gt
     stretch = weak_stretch(path, idx)
     base = variant_config(variant)
+    runs = [("lidar only", OursMethod(variant, base)),
+            ("with the IMU", OursMethod(variant, base.replace(imu={"enabled": True}))),
+            *((f"{method_label(name)}, lidar only", method_from_name(name)) for name in lidar_only)]
     out = []
-    for label, config in (("lidar only", base), ("with the IMU", base.replace(imu={"enabled": True}))):
-        run = run_method(OursMethod(variant, config), seq, frames=frames)
+    for label, method in runs:
+        run = run_method(method, seq, frames=frames, keep_failures=True)
+        if not run.ok:
+            out.append((label, {"error": run.error}))
+            continue
         m = evaluate_trajectory(T_gt, run.poses)
         fig = {"t_err_pct": m.t_err_pct, "ate_m": float(np.sqrt(np.mean(m.ate_errors_m**2))),
-               "seconds": run.seconds, "flagged": int(np.sum(run.degenerate)) if run.degenerate is not None else 0}
+               "seconds": run.seconds, "flagged": int(np.sum(run.degenerate)) if run.degenerate is not None else "-"}
         if stretch is not None:
             s = stretch_error(T_gt, run.poses, *stretch)
             fig.update(stretch=f"{idx[s.first]}-{idx[s.last]}", stretch_end_m=s.end_m, stretch_along_m=s.along_m,
@@ -111,13 +121,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("sequences", nargs="+", type=Path)
     ap.add_argument("--variant", default="salo-map")
     ap.add_argument("--frames", help="frame range A:B")
+    ap.add_argument("--lidar-only", default="", help="comma-separated methods run lidar-only on the first sequence "
+                    "(ours or the peers: bl, ncf, salo, kiss-icp, genz-icp, small-gicp)")
     args = ap.parse_args(argv)
+    others = tuple(m.strip() for m in args.lidar_only.split(",") if m.strip())
     frames = slice(*[int(x) if x else None for x in args.frames.split(":")]) if args.frames else None
     print("| sequence | run | t_err % | ATE m | weak stretch (frames) | its end error m | along its axis m "
           "| its largest m | frames flagged |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for path in args.sequences:
-        for label, f in measure(path, args.variant, frames):
+    for i, path in enumerate(args.sequences):
+        for label, f in measure(path, args.variant, frames, others if i == 0 else ()):
+            if "error" in f:
+                print(f"| {path.name} | {label} | failed: {f['error']} |", flush=True)
+                continue
             print(f"| {path.name} | {label} | {f['t_err_pct']:.2f} | {f['ate_m']:.2f} | {f.get('stretch', '-')} | "
                   f"{f.get('stretch_end_m', float('nan')):.2f} | {f.get('stretch_along_m', float('nan')):+.2f} | "
                   f"{f.get('stretch_max_m', float('nan')):.2f} | {f['flagged']} |", flush=True)
