@@ -193,3 +193,35 @@ def test_a_stopped_run_resumes_from_what_it_finished(tmp_path, monkeypatch):
     # another frame count, or a method without its poses there: run again
     assert generalize.finished_result(tmp_path, params.sequences()[0], replace(params, frames=40)) is None
     assert generalize.finished_result(tmp_path, params.sequences()[0], replace(params, methods=("bl", "ncf"))) is None
+
+
+def test_the_suite_with_an_imu_runs_the_default_with_and_without_it(tmp_path):
+    """``imu``: every sequence carries an IMU of the grade (the lidar's frames unchanged), ``default-imu`` uses it,
+    and the summary reads it against the default on the same frames."""
+    from tools.experiments.generalize import IMU_METHOD, imu_against_lidar_only, odometry_config, write_generalize
+    from tools.family_suite import simulate
+    from tools.records import RunRecord
+
+    with pytest.raises(ValueError, match="needs sequences with an IMU"):
+        GeneralizeParams(split="tuning", methods=("default", IMU_METHOD))
+    with pytest.raises(ValueError, match="unknown IMU grade"):
+        GeneralizeParams(split="tuning", imu="navigation")
+    assert odometry_config(IMU_METHOD, {}).imu.enabled and not odometry_config("default", {}).imu.enabled
+    params = GeneralizeParams(split="tuning", seeds=(TUNING_SEEDS[0],), families=("city",), kinds=("real",),
+                              methods=("default", IMU_METHOD), frames=30, segment_lengths_m=(4.0,), imu="consumer")
+    (seq,) = params.sequences()
+    with_imu, without = simulate(seq), simulate(replace(seq, imu=None))
+    assert with_imu.imu is not None and without.imu is None and len(with_imu.imu) > 30 * 0.1 * 200
+    np.testing.assert_array_equal(with_imu[7].points, without[7].points)
+    results = run_generalize(params, workers=1)
+    runs = results[0]["methods"]
+    assert runs["default"]["ok"] and runs[IMU_METHOD]["ok"]
+    # the IMU's prediction takes over after its first window (20 frames): the poses part from lidar-only's there
+    assert not np.array_equal(runs["default"]["poses"], runs[IMU_METHOD]["poses"])
+    np.testing.assert_array_equal(runs["default"]["poses"][:20], runs[IMU_METHOD]["poses"][:20])
+    (row,) = [r for r in imu_against_lidar_only(results) if r["kind"] == "real"]
+    assert row["sequences"] == 1 and row["ratio_max"] == pytest.approx(
+        runs[IMU_METHOD]["t_err_pct"] / runs["default"]["t_err_pct"])
+    record = RunRecord(tmp_path, "generalize", params.to_dict()).start()
+    write_generalize(results, params, record)
+    assert "The default with the IMU (consumer grade) against lidar only" in (tmp_path / "summary.md").read_text()

@@ -266,3 +266,17 @@ def test_a_trajectory_without_derivatives_cannot_carry_an_imu():
     flat = PathTrajectory(s_curve(), False, 10.0, 1.5, 2.0, 1.9, surface_height=lambda x, y: 0.0 * x)
     with pytest.raises(ValueError, match="surface_height has no gradient and hessian"):
         flat.kinematics_at(np.array([1.0]))
+
+
+def test_an_imu_grade_sets_its_noise_and_keeps_the_mounting():
+    from simlidar.imu import IMU_GRADES, imu_of_grade
+
+    mounted = ImuModel(lever_arm_m=(0.5, 0.0, 0.1), time_offset_s=0.004, update_rate=400.0)
+    for grade, keys in IMU_GRADES.items():
+        model = imu_of_grade(grade, mounted)
+        assert model.enabled and all(getattr(model, k) == v for k, v in keys.items()), grade
+        assert (model.lever_arm_m, model.time_offset_s, model.update_rate) == ((0.5, 0.0, 0.1), 0.004, 400.0)
+    # the tactical unit is the quieter on every key
+    assert all(IMU_GRADES["tactical"][k] < IMU_GRADES["consumer"][k] for k in IMU_GRADES["consumer"])
+    with pytest.raises(ValueError, match="unknown IMU grade 'navigation'.*consumer"):
+        imu_of_grade("navigation")

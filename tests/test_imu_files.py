@@ -230,3 +230,18 @@ def test_an_imu_along_poses_from_a_file_is_refused_before_anything_is_written(tm
     with pytest.raises(ImuUnavailable, match="no continuous acceleration"):
         simulate_sequence(box_room(), constant_velocity(v=(1.0, 0.0, 0.0)), sensor(), out, frames=2)
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_salo_simulate_takes_an_imu_grade(tmp_path):
+    """``salo simulate --imu tactical``: the sequence's sensor file holds the grade's keys, and imu.csv its samples."""
+    from simlidar.imu import IMU_GRADES
+    from tools.cli import main as salo
+
+    out = tmp_path / "seq"
+    assert salo(["simulate", "--scene", "city", "--frames", "2", "--sensor", "vlp16", "--imu", "tactical",
+                 "--out", str(out)]) == 0
+    written = open_sequence(out)
+    assert written.sensor.imu.enabled and len(written.imu) > 0.2 * 200
+    assert all(getattr(written.sensor.imu, k) == v for k, v in IMU_GRADES["tactical"].items())
+    with pytest.raises(SystemExit):
+        salo(["simulate", "--scene", "city", "--frames", "2", "--imu", "navigation", "--out", str(tmp_path / "x")])
