@@ -46,8 +46,9 @@ OFFSET_S = 3.0
 
 @dataclass
 class Counts:
-    """Poles summed over a sequence's scans: all of them (``prepare_scan`` without the filter), the isolation's
-    (with it), and the pole map's target after the last scan with and without the confirmation."""
+    """Poles summed over a sequence's scans: all of them (``prepare_scan`` without the filter), what the filter
+    keeps (with it; each scan's weather decided as the odometry decides it, ``WeatherGate``), and the pole
+    map's target after the last scan with and without the confirmation."""
 
     scans: int = 0
     cluttered: int = 0
