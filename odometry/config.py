@@ -152,10 +152,11 @@ class PolesParams(_Stage):
                           "constraints, and start the first registration from the poles' offset")
     max_width_m: float = param(1.2, "widest run across the beam that counts as a pole", above=0.0)
     frames_kept: int = param(30, "poles of this many recent frames are matched against", min=1)
-    clutter_filter: bool = param(True, "weather clutter is not a pole: on a scan with many one-return poles crowded "
-                                 "together (fog, snow), a pole must stand clear of other poles and is matched "
-                                 "against once a pole of the frame before or after it confirms it; a clear "
-                                 "scan's poles are kept as they are (odometry/poles.py)")
+    clutter_filter: bool = param(True, "weather clutter is not a pole: on a scan in weather (many one-return poles "
+                                 "crowded together, as fog and snow make; or a few, after scans in weather), a pole "
+                                 "must stand clear of other poles and be as wide as a post, and is matched against "
+                                 "once a pole of the frame before or after it confirms it; a clear scan's poles are "
+                                 "kept as they are (odometry/poles.py)")
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -47,7 +47,7 @@ from .icp import NearestCache, RegistrationResult, Source, Target, match, regist
 from .inertial import InertialOdometry
 from .kdtree import KDTree
 from .local_map import LocalMap
-from .poles import PoleMap
+from .poles import PoleMap, WeatherGate
 from .preparation import PreparedScan, prepare_scan
 from .rejectors import Rejector
 from .targets import filtered_scan_target, make_source, map_points, new_local_map
@@ -73,6 +73,8 @@ class OdometryState:
         the background thread while the next scan is prepared; None before.
     local_map: the map of recent scans (``match.target: map``), else None.
     pole_map: the poles of recent frames (``poles.enabled``, with a sensor), else None.
+    weather_gate: whether the scans are in weather, for the poles' clutter filter (``poles.clutter_filter``),
+        else None.
     free_space: the free space of recent registered scans (``dynamic.enabled``), else None.
     """
 
@@ -86,6 +88,7 @@ class OdometryState:
     target_tree: tuple[np.ndarray, Future] | None = None
     local_map: LocalMap | None = None
     pole_map: PoleMap | None = None
+    weather_gate: WeatherGate | None = None
     free_space: FreeSpace | None = None
 
 
@@ -228,6 +231,8 @@ class Odometry:
         self.with_poles = config.poles.enabled and sensor is not None
         self.state = OdometryState(local_map=new_local_map(config, sensor) if config.match.target == "map" else None,
                                    pole_map=self._new_pole_map() if self.with_poles else None,
+                                   weather_gate=WeatherGate() if self.with_poles and config.poles.clutter_filter
+                                   else None,
                                    free_space=FreeSpace(config.dynamic, sensor) if config.dynamic.enabled else None)
         self.diagnostics: list[FrameDiagnostics] = []
         self.inertial = None
@@ -303,6 +308,7 @@ class Odometry:
             if imu is not None:
                 T_guess, correction = imu.motion, se3.inverse(imu.motion) @ imu.sweep
         T_sweep = T_guess if correction is None else T_guess @ correction
+        self._drop_weather_poles(prepared)
         self._drop_moving(prepared, T_guess, period)
         prepared.diag.deskewed = prepared.deskewing
         t = time.perf_counter()
@@ -478,6 +484,17 @@ class Odometry:
             # progress bar; the diagnostics carry the flags and the commands print their count.
             log.info("frame %d: %s; pose extrapolated", diag.frame, why)
 
+    def _drop_weather_poles(self, prepared: PreparedScan) -> None:
+        """The poles' clutter filter (``poles.clutter_filter``): on a scan in weather (``poles.WeatherGate``, which
+        remembers the scans before) the poles weather would make leave the scan's poles, and those left wait
+        for the pole map's confirmation; a clear scan's stay as they are."""
+        poles, gate = prepared.scan.poles, self.state.weather_gate
+        if poles is None or gate is None:
+            return
+        if gate.update(poles.clutter_per_beam):
+            prepared.scan.poles = poles.without_suspects()
+        prepared.scan.counts["poles_weather"] = prepared.scan.poles.dropped
+
     def _drop_moving(self, prepared: PreparedScan, T_guess: np.ndarray, period_s: float) -> None:
         """The moving-object stage (``odometry.dynamic``, ``dynamic.enabled``): the scan's points (as measured)
         at places a recent scan saw through, placed with the predicted pose, leave its ICP points and centroids;
@@ -510,8 +527,7 @@ class Odometry:
             times = poles.times_s if prepared.deskewing else None
             still = ~st.free_space.moving_points(
                 sensor_frame_points(poles.points, times, period_s, T_world_start, T_guess, measured=True))
-            scan.poles = replace(poles, points=poles.points[still], counts=poles.counts[still],
-                                 times_s=None if poles.times_s is None else poles.times_s[still])
+            scan.poles = poles.subset(still)
             scan.counts["moving_poles"] = int((~still).sum())
         prepared.seconds["dynamic"] = time.perf_counter() - t
 

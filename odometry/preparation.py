@@ -115,7 +115,6 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
         scan.poles = extract_poles(clean.points, rings, sensor.rings, sensor.columns_per_sweep,
                                    config.poles.max_width_m, times, clutter_filter=config.poles.clutter_filter)
         scan.counts["poles"] = len(scan.poles)
-        scan.counts["poles_crowded"] = scan.poles.crowded
         scan.seconds["poles"] = time.perf_counter() - t
     diag.filter_counts = scan.counts
     return PreparedScan(clean, scan, deskewing, diag, dict(scan.seconds), time.perf_counter() - t_start)

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial import KDTree
 
 from odometry.config import DEFAULT_VARIANT, variant
-from odometry.poles import PoleMap
+from odometry.poles import PoleMap, WeatherGate
 from odometry.preparation import prepare_scan
 from scenes.families import FAMILIES
 from simlidar import se3
@@ -46,8 +46,9 @@ OFFSET_S = 3.0
 
 @dataclass
 class Counts:
-    """Poles summed over a sequence's scans: all of them (``prepare_scan`` without the filter), the isolation's
-    (with it), and the pole map's target after the last scan with and without the confirmation."""
+    """Poles summed over a sequence's scans: all of them (``prepare_scan`` without the filter), what the filter
+    keeps (with it; each scan's weather decided as the odometry decides it, ``WeatherGate``), and the pole
+    map's target after the last scan with and without the confirmation."""
 
     scans: int = 0
     cluttered: int = 0
@@ -126,7 +127,7 @@ def count_sequence(spec, frames: int) -> tuple[Counts, list[float]]:
     on = variant(DEFAULT_VARIANT)
     off = replace(on, poles=replace(on.poles, clutter_filter=False))
     on = replace(on, poles=replace(on.poles, clutter_filter=True))
-    c = Counts(scans=len(seq))
+    c, gate = Counts(scans=len(seq)), WeatherGate()
     every, every_labels, isolated, isolated_labels, cluttered, rates = [], [], [], [], [], []
     for k in range(len(seq)):
         frame = seq[k]
@@ -136,7 +137,9 @@ def count_sequence(spec, frames: int) -> tuple[Counts, list[float]]:
         every.append(se3.transform_points(seq.poses[k], points))
         every_labels.append(weather)
         points, weather, poles = labelled_poles(frame, sensor, on, counts=c)
-        is_cluttered = poles.cluttered
+        is_cluttered = gate.update(poles.clutter_per_beam)  # (as the odometry's predict stage decides)
+        if is_cluttered:
+            points, weather = points[~poles.suspect], weather[~poles.suspect]
         rates.append(poles.clutter_per_beam)
         c.cluttered += int(is_cluttered)
         c.isolated_structure += int((~weather).sum())
@@ -156,10 +159,10 @@ def real_rates(folder: Path, sensor_name: str) -> tuple[int, list[float]]:
     from simlidar.sensor import load_preset
 
     seq, sensor, config = open_sequence(folder, sensor=sensor_name), load_preset(sensor_name), variant(DEFAULT_VARIANT)
-    cluttered, rates = 0, []
+    cluttered, rates, gate = 0, [], WeatherGate()
     for k in range(len(seq)):
         poles = prepare_scan(seq[k].points, None, None, config, sensor, with_normals=False, with_poles=True).scan.poles
-        cluttered += int(poles.cluttered)
+        cluttered += int(gate.update(poles.clutter_per_beam))
         rates.append(poles.clutter_per_beam)
     return cluttered, rates
 
