@@ -310,10 +310,13 @@ def family_error_plot(path, results: list[dict], methods: tuple[str, ...], label
             name = label(m)
             xs, means = [], []
             for i, fam in enumerate(families):
-                vals = [r["methods"][m]["t_err_pct"] for r in results
+                runs = [r["methods"][m] for r in results
                         if r["sequence"]["family"] == fam and r["sequence"]["kind"] == kind
                         and r["methods"].get(m, {}).get("ok")]
-                vals = np.clip(np.nan_to_num(np.array(vals, dtype=float), nan=1e3, posinf=1e3), 1e-3, 1e3)
+                # a diverged run at the top; a path shorter than every segment has no t_err: no dot
+                vals = [1e3 if x.get("diverged") else x["t_err_pct"] for x in runs]
+                vals = np.array([v for v in vals if v is not None and not np.isnan(v)], dtype=float)
+                vals = np.clip(np.nan_to_num(vals, posinf=1e3), 1e-3, 1e3)
                 x = i - 0.4 + (j + 0.5) * width
                 if len(vals):
                     xs.append(x)
