@@ -135,7 +135,7 @@ class Poles:
         if self.suspect is None:
             return replace(self, cluttered=True)
         kept = self.subset(~self.suspect)
-        return replace(kept, cluttered=True, dropped=self.dropped + int(self.suspect.sum()), suspect=None)
+        return replace(kept, cluttered=True, dropped=int(self.suspect.sum()), suspect=None)
 
 
 class WeatherGate:
@@ -163,13 +163,14 @@ def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns
     points = np.ascontiguousarray(points, dtype=np.float64)
     image = range_image(rings, points, n_rings, n_columns)
     times = np.full(len(points), np.nan) if times_s is None else np.ascontiguousarray(times_s, dtype=np.float64)
+    column_rad = 2.0 * math.pi / n_columns
     centroids, counts, mean_times = foreground_runs(
-        image, points, times, 2.0 * math.pi / n_columns, float(max_width_m), MIN_GAP_M, GAP_FRACTION,
+        image, points, times, column_rad, float(max_width_m), MIN_GAP_M, GAP_FRACTION,
         RUN_TOLERANCE_M, RUN_TOLERANCE_FRACTION, MAX_COLUMN_GAP)
     poles = Poles(centroids, counts, None if times_s is None else mean_times)
     if clutter_filter:
         among = crowded(centroids, n_columns) if len(centroids) else np.zeros(0, dtype=bool)
-        width_m = counts * np.hypot(centroids[:, 0], centroids[:, 1]) * (2.0 * math.pi / n_columns)
+        width_m = counts * np.hypot(centroids[:, 0], centroids[:, 1]) * column_rad
         poles.clutter_per_beam = np.count_nonzero(among & (counts == 1)) / (n_rings * n_columns)
         poles.suspect = among | (width_m < MIN_WIDTH_M)
     return poles
