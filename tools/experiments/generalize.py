@@ -350,7 +350,7 @@ def imu_against_lidar_only(results: list[dict]) -> list[dict]:
     groups: dict[str, list[tuple[str, float, float, bool, bool]]] = {}
     for r in results:
         a, b = r["methods"].get("default", {}), r["methods"].get(IMU_METHOD, {})
-        if not (a.get("ok") and b.get("ok") and np.isfinite(a["t_err_pct"]) and np.isfinite(b["t_err_pct"])):
+        if not (a.get("ok") and b.get("ok") and not np.isnan(a["t_err_pct"]) and not np.isnan(b["t_err_pct"])):
             continue  # (a path shorter than every segment has no t_err to compare)
         pair = (r["name"], a["t_err_pct"], b["t_err_pct"], bool(a["failed"]), bool(b["failed"]))
         groups.setdefault(r["sequence"]["kind"], []).append(pair)
