@@ -18,6 +18,7 @@ from odometry.poles import (
     PoleMap,
     PoleTarget,
     WeatherGate,
+    crowded,
     extract_poles,
     pole_rows,
     pole_translation,
@@ -269,6 +270,18 @@ def test_no_post_is_narrower_than_the_weather_rule(preset):
     r = np.hypot(poles.points[:, 0], poles.points[:, 1])
     assert len(poles) > 10 and r.max() > 20.0
     assert not poles.suspect.any() and poles.clutter_per_beam == 0.0
+    # particles: single returns of one ring pulled to 3 m along their beams, tens of degrees apart (no
+    # other pole within the isolation radius): only the width rule can mark them, and it must
+    xyz = scan.xyz.copy()
+    ring = sensor.rings // 2 + 2
+    far = np.flatnonzero((scan.ring == ring) & (np.linalg.norm(xyz, axis=1) > 8.0))[::150]
+    xyz[far] *= 3.0 / np.linalg.norm(xyz[far], axis=1, keepdims=True)
+    with_particles = extract_poles(xyz, scan.ring, sensor.rings, sensor.columns_per_sweep, 0.6, clutter_filter=True)
+    d = np.linalg.norm(with_particles.points[:, None, :] - xyz[far][None, :, :], axis=2).min(axis=1)
+    particle = d < 1e-6
+    assert particle.sum() >= 5
+    assert with_particles.suspect[particle].all() and not with_particles.suspect[~particle].any()
+    assert not crowded(with_particles.points, sensor.columns_per_sweep)[particle].any()
 
 
 @pytest.mark.parametrize("folder, sensor", [("kitti/sequences/05", "hdl64e"), ("hdl32-pair", "hdl32e")])
@@ -289,3 +302,21 @@ def test_real_streets_are_not_cluttered(real_data, folder, sensor):
         on = extract_poles(points, rings, lidar.rings, lidar.columns_per_sweep, 1.2, clutter_filter=True)
         assert len(off) > 50 and not gate.update(on.clutter_per_beam), (folder, k)
         assert np.array_equal(on.points, off.points)
+
+
+@pytest.mark.slow
+def test_the_odometry_drops_the_weathers_poles_on_scans_in_weather_only():
+    """The pipeline's gate: every scan of a dense-fog drive is in weather and loses its suspect poles (counted
+    per frame); the clear twin's scans lose none."""
+    from simlidar.in_memory import simulate_in_memory
+    from tools.family_suite import suite_world, weather_suite
+    from tools.methods import OursMethod, run_method
+
+    dropped = {}
+    for spec in weather_suite((7,), 200, ("city",), ("clear", "dense-fog"), ("real",)):
+        world, trajectory, sensor, start_s = suite_world(spec)
+        seq = simulate_in_memory(world, trajectory, sensor, 3, seed=7, t_start=start_s + 3.0, fields="real")
+        run = run_method(OursMethod("default", variant(DEFAULT_VARIANT)), seq)
+        dropped[spec.weather] = [d.filter_counts["poles_weather"] for d in run.diagnostics]
+    assert dropped["clear"] == [0, 0, 0]
+    assert all(n > 100 for n in dropped["dense-fog"]), dropped
