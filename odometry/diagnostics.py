@@ -42,6 +42,7 @@ class FrameDiagnostics:
     info_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
     translation_eigenvalues: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     weakest_direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    translation_information: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.nan))
     remapped: int = 0
     degenerate: bool = False
     singular: bool = False
@@ -64,6 +65,7 @@ class FrameDiagnostics:
         self.info_eigenvalues = result.info_eigenvalues
         self.translation_eigenvalues = result.translation_eigenvalues
         self.weakest_direction = result.weakest_direction
+        self.translation_information = result.H[:3, :3] / max(result.n_matches, 1)
         self.remapped = result.remapped
         self.degenerate = result.degenerate
         self.singular = result.singular

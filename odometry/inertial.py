@@ -23,14 +23,18 @@ The estimator (``InertialOdometry``): after each scan, a sliding window of the l
 ``imu.window_frames`` registered poses is fitted by linear least squares for the IMU's position
 and velocity at the window's start, gravity and the accelerometer's bias: each pose's IMU origin
 is the chain of the preintegrated segments from the start (the poses' own rotations carry each
-segment, so the gyroscope's drift does not enter), against the registered positions. A frame the
-registration flagged weak contributes only across its weakest direction (there its position is the
-prediction itself, no evidence), an extrapolated frame nothing. Priors: the start's position (the
-registered one), velocity (the last fit's, loose before the first), gravity (the last fit's; at
-first the mean specific force's direction, loose) and its magnitude (``gravity_m_s2`` of the
-sensor file's ``imu`` section, tight), the bias (the last fit's, with the turn-on spread or the
-random walk over the window). The gyroscope's bias is a weighted mean of what each segment's
-rotation, against the registered rotations, says it is, with the same kind of prior.
+segment, so the gyroscope's drift does not enter), against the registered positions. Each direction
+of a frame's position counts by the registration's information in it (a direction held to the
+prediction is no evidence), an extrapolated frame not at all. Priors: the start's position (the
+registered one), velocity (the last fit's, loose before the first), gravity and the bias (the
+latest fit whose window ended before this one's first frame, with the bias's random walk since:
+each frame's evidence counted once; before there is one, gravity along the mean specific force,
+loose, and the bias zero with the turn-on spread) and gravity's magnitude (``gravity_m_s2`` of the
+sensor file's ``imu`` section, tight). Taking the last fit's instead (its window shares all but one
+frame with this one) counts each frame window-length times over: the constants grow certain at
+once and keep what the first windows made of a cold start's registrations for hundreds of frames.
+The gyroscope's bias is a weighted mean of what each segment's rotation, against the registered
+rotations, says it is, with the same kind of prior.
 
 The lidar-to-IMU transform, the IMU's clock offset and gravity's magnitude come from the sensor
 file's ``imu`` section (``simlidar.imu.ImuModel``; its defaults when it has none: the IMU at the
@@ -134,18 +138,28 @@ def preintegration_error_bound(dt_s: float, span_s: float, specific_force_m_s2: 
 
 @dataclass
 class _Record:
-    """One registered frame in the window: lidar time (s), pose (4, 4), the registration's weakest
-    translation (world, unit) or None and its eigenvalue (the scaled information per match), whether its
-    pose is a registration (not extrapolated), the segment from the previous frame (None for the first),
-    and the velocity (3,) estimated for it."""
+    """One registered frame in the window: lidar time (s), pose (4, 4), the registration's information
+    on its translation per match (3, 3, world) or None, whether its pose is a registration (not
+    extrapolated), the segment from the previous frame (None for the first), and the velocity (3,)
+    estimated for it."""
 
     time_s: float
     pose: np.ndarray
-    weak_direction: np.ndarray | None
-    weak_eigenvalue: float
+    information: np.ndarray | None
     usable: bool
     segment: Preintegrated | None
     velocity: np.ndarray | None = None
+
+
+@dataclass
+class _Constants:
+    """A window's fit of the constants: the time (s) of its last frame, gravity (3,) world m/s^2, the
+    accelerometer's bias (3,) m/s^2 and their covariance (6, 6)."""
+
+    end_time_s: float
+    gravity: np.ndarray
+    accel_bias: np.ndarray
+    cov: np.ndarray
 
 
 @dataclass
@@ -175,12 +189,13 @@ class InertialOdometry:
     gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     records: deque = field(default_factory=deque)
-    _constants_cov: np.ndarray | None = None  # (6, 6) the last fit's covariance of gravity and the bias
+    fits: deque = field(default_factory=deque)  # the last fits' constants (``_Constants``), oldest first
 
     def __post_init__(self) -> None:
         self.T_lidar_imu = self.model.T_lidar_imu
         self.T_imu_lidar = se3.inverse(self.T_lidar_imu)
         self.records = deque(maxlen=self.params.window_frames)
+        self.fits = deque(maxlen=self.params.window_frames + 1)
 
     @property
     def ready(self) -> bool:
@@ -221,11 +236,11 @@ class InertialOdometry:
         T_next, _ = self._advance(T_imu, v, sweep_seg)
         return InertialPrediction(motion, se3.inverse(T_world_cur) @ (T_next @ self.T_imu_lidar))
 
-    def update(self, T_world_cur: np.ndarray, time_s: float | None, weak_direction_world: np.ndarray | None,
-               weak_eigenvalue: float, usable: bool) -> None:
+    def update(self, T_world_cur: np.ndarray, time_s: float | None, information_world: np.ndarray | None,
+               usable: bool) -> None:
         """Take a frame's registered pose (4, 4) at lidar time ``time_s``: the velocity carried to it, and
-        the window refitted. weak_direction_world: (3,) the registration's weakest translation (world), or
-        None; weak_eigenvalue: its scaled information per match. usable: the pose is a registration, not an
+        the window refitted. information_world: (3, 3) the registration's information on its translation per
+        match (world), or None (all directions count). usable: the pose is a registration, not an
         extrapolation."""
         if time_s is None:  # (no stamps: nothing to integrate between; the window starts again)
             self.records.clear()
@@ -240,8 +255,8 @@ class InertialOdometry:
                 self.velocity = None
             elif self.velocity is not None:
                 _, self.velocity = self._advance(prev.pose @ self.T_lidar_imu, self.velocity, seg)
-        self.records.append(_Record(float(time_s), np.array(T_world_cur), weak_direction_world,
-                                    float(weak_eigenvalue), bool(usable), seg,
+        self.records.append(_Record(float(time_s), np.array(T_world_cur),
+                                    None if information_world is None else np.array(information_world), bool(usable), seg,
                                     None if self.velocity is None else self.velocity.copy()))
         if len(self.records) == self.records.maxlen:
             self._fit_gyro_bias()
@@ -284,15 +299,18 @@ class InertialOdometry:
         magnitude is linearised about the estimate)."""
         recs = list(self.records)
         first_fit = self.gravity is None or recs[0].velocity is None
-        g_prior = self._initial_gravity() if self.gravity is None else self.gravity
         v_prior = np.zeros(3) if recs[0].velocity is None else recs[0].velocity
         v_prior_std = 100.0 if first_fit else 0.1
-        if self._constants_cov is None:  # (the first fit: gravity from the specific force, loosely; the bias 0)
+        # (the constants' prior: the latest fit sharing no frame with this window, module doc)
+        prior = next((f for f in reversed(self.fits) if f.end_time_s < recs[0].time_s), None)
+        if prior is None:  # (gravity from the specific force, loosely; the bias 0)
             ba_std = max(self.model.accelerometer_turn_on_bias, 1e-3)
+            g_prior, ba_prior = self._initial_gravity(), np.zeros(3)
             prior_cov = np.diag([1.0] * 3 + [ba_std**2] * 3)
-        else:  # (the last fit's, the bias's random walk over a frame added)
-            dt = recs[-1].time_s - recs[-2].time_s
-            prior_cov = self._constants_cov + np.diag([0.0] * 3 + [self.model.accelerometer_random_walk**2 * dt] * 3)
+        else:  # (the bias's random walk since that fit added)
+            walk = self.model.accelerometer_random_walk**2 * (recs[-1].time_s - prior.end_time_s)
+            g_prior, ba_prior = prior.gravity, prior.accel_bias
+            prior_cov = prior.cov + np.diag([0.0] * 3 + [walk] * 3)
         sigma_p = self.params.position_std_m
         # The chain: p_k = A_k x + c_k, v_k = B_k x + e_k
         A, c = np.zeros((3, 12)), np.zeros(3)
@@ -325,20 +343,20 @@ class InertialOdometry:
         for rec, (A_k, c_k, _, _), p in zip(recs[1:], chains[1:], positions[1:], strict=True):
             if not rec.usable:
                 continue
-            # (scaled by the information across the weakest direction: 1/3 per match is the most one direction
-            # can have among three, ``odometry.constraints``; along it the position counts in proportion)
+            # (each direction of the translation scaled by its information: 1/3 per match is the most one
+            # direction can have among three, ``odometry.constraints``; below it the position counts in
+            # proportion, and a direction the registration held to its prior (the prediction) hardly counts)
             W = np.eye(3)
-            if rec.weak_direction is not None:
-                u = rec.weak_direction
-                scale = math.sqrt(min(max(rec.weak_eigenvalue, 0.0) * 3.0, 1.0))
-                W = W + (scale - 1.0) * np.outer(u, u)
+            if rec.information is not None:
+                w, V = np.linalg.eigh(rec.information)
+                W = (V * np.sqrt(np.clip(w * 3.0, 0.0, 1.0))) @ V.T
             add(W @ A_k, W @ (p - c_k), sigma_p)
         add(np.eye(3, 12, 3), v_prior, v_prior_std)
         L = np.linalg.cholesky(np.linalg.inv(prior_cov)).T  # (rows whitening the constants' prior)
         J_prior = np.zeros((6, 12))
         J_prior[:, 6:12] = L
         rows.append(J_prior)
-        rhs.append(L @ np.concatenate([g_prior, np.zeros(3)]))
+        rhs.append(L @ np.concatenate([g_prior, ba_prior - self.accel_bias]))  # (x holds the bias's change)
         g = g_prior
         x = None
         for _ in range(2):
@@ -349,13 +367,14 @@ class InertialOdometry:
             y = np.concatenate([*rhs, [self.model.gravity_m_s2 / 1e-3]])
             x = np.linalg.lstsq(J, y, rcond=None)[0]
             g = x[6:9]
-        self._constants_cov = np.linalg.inv(J.T @ J)[6:12, 6:12]
         B_n, e_n = chains[-1][2], chains[-1][3]
         for rec, (_, _, B_k, e_k) in zip(recs, chains, strict=True):
             rec.velocity = B_k @ x + e_k
         self.velocity = B_n @ x + e_n
         self.gravity = x[6:9]
         self.accel_bias = self.accel_bias + x[9:12]
+        self.fits.append(_Constants(recs[-1].time_s, self.gravity.copy(), self.accel_bias.copy(),
+                                    np.linalg.inv(J.T @ J)[6:12, 6:12]))
         # (the segments keep the bias they were integrated with: ``corrected`` moves them to the new one)
 
 

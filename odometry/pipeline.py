@@ -460,15 +460,14 @@ class Odometry:
 
     def _update_inertial(self, frame: FrameInProgress, pose: np.ndarray) -> None:
         """The IMU's window takes the frame's pose (4, 4) (before ``update`` moves the target), with the
-        registration's weakest translation, from its target's frame to the world, and its eigenvalue."""
+        registration's information on its translation per match, from its target's frame to the world."""
         st, diag = self.state, frame.diag
-        weak, eigenvalue = None, 1.0
-        if np.all(np.isfinite(diag.weakest_direction)) and np.isfinite(diag.translation_eigenvalues[0]):
+        info = None
+        if np.all(np.isfinite(diag.translation_information)):
             R_world_target = (np.eye(3) if st.local_map is not None or not st.poses
                               else st.poses[st.target_frame][:3, :3])
-            weak = R_world_target @ diag.weakest_direction
-            weak, eigenvalue = weak / np.linalg.norm(weak), float(diag.translation_eigenvalues[0])
-        self.inertial.update(pose, st.last_stamp_s, weak, eigenvalue, not diag.extrapolated)
+            info = R_world_target @ diag.translation_information @ R_world_target.T
+        self.inertial.update(pose, st.last_stamp_s, info, not diag.extrapolated)
 
     def conclude(self, frame: FrameInProgress) -> None:
         """The frame's diagnostics: its total time (its preparation's included, wherever that ran), kept
