@@ -138,28 +138,13 @@ def preintegration_error_bound(dt_s: float, span_s: float, specific_force_m_s2: 
 
 @dataclass
 class _Record:
-    """One registered frame in the window: lidar time (s), pose (4, 4), the registration's information
-    on its translation per match (3, 3, world) or None, whether its pose is a registration (not
-    extrapolated), the segment from the previous frame (None for the first), and the velocity (3,)
-    estimated for it."""
+    """One registered frame: lidar time (s), pose (4, 4), whether its pose is a registration (not
+    extrapolated), and the segment from the previous frame (None for the first)."""
 
     time_s: float
     pose: np.ndarray
-    information: np.ndarray | None
     usable: bool
     segment: Preintegrated | None
-    velocity: np.ndarray | None = None
-
-
-@dataclass
-class _Constants:
-    """A window's fit of the constants: the time (s) of its last frame, gravity (3,) world m/s^2, the
-    accelerometer's bias (3,) m/s^2 and their covariance (6, 6)."""
-
-    end_time_s: float
-    gravity: np.ndarray
-    accel_bias: np.ndarray
-    cov: np.ndarray
 
 
 @dataclass
@@ -169,6 +154,11 @@ class InertialPrediction:
 
     motion: np.ndarray
     sweep: np.ndarray
+
+
+# The filter's state: the IMU origin's position and velocity (world), gravity (world) and the accelerometer's
+# bias (IMU frame), each (3,), in this order
+_P, _V, _G, _B = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 
 
 @dataclass
@@ -189,17 +179,18 @@ class InertialOdometry:
     gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     records: deque = field(default_factory=deque)
-    fits: deque = field(default_factory=deque)  # the last fits' constants (``_Constants``), oldest first
+    state: np.ndarray | None = None  # (12,) the filter's mean (position, velocity, gravity, bias), None: not started
+    covariance: np.ndarray | None = None  # (12, 12)
+    filtered_frames: int = 0  # frames the filter has taken since it started
 
     def __post_init__(self) -> None:
         self.T_lidar_imu = self.model.T_lidar_imu
         self.T_imu_lidar = se3.inverse(self.T_lidar_imu)
         self.records = deque(maxlen=self.params.window_frames)
-        self.fits = deque(maxlen=self.params.window_frames + 1)
 
     @property
     def ready(self) -> bool:
-        """The first window was fitted: the IMU predicts."""
+        """The filter has taken ``imu.window_frames`` frames: the IMU predicts."""
         return self.velocity is not None and self.gravity is not None
 
     def _imu_time(self, lidar_time_s: float) -> float:
@@ -220,7 +211,7 @@ class InertialOdometry:
     def predict(self, T_world_prev: np.ndarray, prev_time_s: float | None, time_s: float | None,
                 period_s: float) -> InertialPrediction | None:
         """The scan at lidar time ``time_s`` (its sweep ``period_s`` long) after the frame at ``T_world_prev``
-        (4, 4) and ``prev_time_s``: None before the first window's fit, without times, or where the samples
+        (4, 4) and ``prev_time_s``: None before the filter is ready, without times, or where the samples
         do not cover the span."""
         if not self.ready or prev_time_s is None or time_s is None or not self.records:
             return None
@@ -236,41 +227,143 @@ class InertialOdometry:
         T_next, _ = self._advance(T_imu, v, sweep_seg)
         return InertialPrediction(motion, se3.inverse(T_world_cur) @ (T_next @ self.T_imu_lidar))
 
+    def reset(self) -> None:
+        """Forget the motion (a break in the stamps or the samples): the filter starts again at the next
+        frame, keeping its last gravity and biases only as the mean specific force and zero would."""
+        self.records.clear()
+        self.state = self.covariance = self.velocity = None
+        self.filtered_frames = 0
+
     def update(self, T_world_cur: np.ndarray, time_s: float | None, information_world: np.ndarray | None,
-               usable: bool) -> None:
-        """Take a frame's registered pose (4, 4) at lidar time ``time_s``: the velocity carried to it, and
-        the window refitted. information_world: (3, 3) the registration's information on its translation per
-        match (world), or None (all directions count). usable: the pose is a registration, not an
-        extrapolation."""
-        if time_s is None:  # (no stamps: nothing to integrate between; the window starts again)
-            self.records.clear()
-            self.velocity = None
+               usable: bool, T_world_predicted: np.ndarray | None = None, prior_eigenvalue: float = 0.0,
+               weak_update: str = "prior") -> None:
+        """Take a frame's registered pose (4, 4) at lidar time ``time_s``: the filter carried to it with the
+        segment from the last frame, then corrected with its position. information_world: (3, 3) the
+        registration's information on its translation per match (world), or None (all directions count).
+        usable: the pose is a registration, not an extrapolation. T_world_predicted: (4, 4) the pose the
+        registration started from and was held to in weak directions with ``prior_eigenvalue`` (the config's
+        ``degeneracy.min_constraint_eigenvalue``) as ``weak_update`` says (``degeneracy.weak_direction_update``):
+        what the registration added to it is the evidence (``_correct``)."""
+        if time_s is None:  # (no stamps: nothing to integrate between; the filter starts again)
+            self.reset()
             return
         seg = None
         if self.records:
             prev = self.records[-1]
             seg = self._segment(prev.time_s, time_s)
-            if seg is None:  # (a gap in the samples: the chain breaks; start a new window)
-                self.records.clear()
-                self.velocity = None
-            elif self.velocity is not None:
-                _, self.velocity = self._advance(prev.pose @ self.T_lidar_imu, self.velocity, seg)
-        self.records.append(_Record(float(time_s), np.array(T_world_cur),
-                                    None if information_world is None else np.array(information_world), bool(usable), seg,
-                                    None if self.velocity is None else self.velocity.copy()))
+            if seg is None:  # (a gap in the samples: the chain breaks; start again)
+                self.reset()
+            else:
+                if self.state is None:
+                    self._start(prev, seg)
+                self._propagate(prev.pose, seg)
+                if usable:
+                    predicted = None if T_world_predicted is None else (T_world_predicted @ self.T_lidar_imu)[:3, 3]
+                    self._correct((T_world_cur @ self.T_lidar_imu)[:3, 3], information_world, predicted,
+                                  prior_eigenvalue, weak_update)
+                self._hold_gravity_magnitude()
+                self.filtered_frames += 1
+                self.gravity, self.accel_bias = self.state[_G].copy(), self.state[_B].copy()
+                if self.filtered_frames >= self.params.window_frames:
+                    self.velocity = self.state[_V].copy()
+        self.records.append(_Record(float(time_s), np.array(T_world_cur), bool(usable), seg))
         if len(self.records) == self.records.maxlen:
             self._fit_gyro_bias()
-            self._fit_window()
 
-    # ---- the window's fits
+    # ---- the filter
+    def _start(self, first: _Record, seg: Preintegrated) -> None:
+        """The state at the first frame: its registered position, velocity unknown, gravity along the mean
+        specific force over the first segment (the vehicle's own acceleration is the error, loose), the
+        accelerometer's bias zero with its turn-on spread."""
+        s = self.samples.between(self._imu_time(first.time_s), self._imu_time(first.time_s + seg.dt_s))
+        f = s.specific_force.mean(axis=0) if len(s) else np.array([0.0, 0.0, self.model.gravity_m_s2])
+        f_world = first.pose[:3, :3] @ self.T_lidar_imu[:3, :3] @ f
+        g = -self.model.gravity_m_s2 * f_world / max(np.linalg.norm(f_world), 1e-9)
+        self.state = np.concatenate([(first.pose @ self.T_lidar_imu)[:3, 3], np.zeros(3), g, np.zeros(3)])
+        ba_std = max(self.model.accelerometer_turn_on_bias, 1e-3)
+        self.covariance = np.diag([self.params.position_std_m**2] * 3 + [100.0**2] * 3 + [1.0] * 3
+                                  + [ba_std**2] * 3)
+
+    def _propagate(self, T_world_prev: np.ndarray, seg: Preintegrated) -> None:
+        """Carry the state over ``seg`` (Forster's chaining, linear in the state with the previous frame's
+        registered rotation), its covariance with the accelerometer's noise, the bias's random walk and the
+        registered rotation's error turning the segment's velocity and position changes."""
+        x, R, dt = self.state, T_world_prev[:3, :3] @ self.T_lidar_imu[:3, :3], seg.dt_s
+        dv, dp = seg.corrected(x[_B])
+        I3 = np.eye(3)
+        F = np.eye(12)
+        F[_P, _V], F[_P, _G], F[_P, _B] = dt * I3, 0.5 * dt * dt * I3, R @ seg.dp_dba
+        F[_V, _G], F[_V, _B] = dt * I3, R @ seg.dv_dba
+        out = x.copy()
+        out[_P] = x[_P] + x[_V] * dt + 0.5 * x[_G] * dt * dt + R @ dp
+        out[_V] = x[_V] + x[_G] * dt + R @ dv
+        na, rot = self.model.accelerometer_noise_density**2, math.radians(self.params.rotation_std_deg) ** 2
+        Q = np.zeros((12, 12))
+        Q[_P, _P] = (na * dt**3 / 3 + rot * float(dp @ dp)) * I3
+        Q[_P, _V] = Q[_V, _P] = na * dt * dt / 2 * I3
+        Q[_V, _V] = (na * dt + rot * float(dv @ dv)) * I3
+        Q[_B, _B] = self.model.accelerometer_random_walk**2 * dt * I3
+        self.state, self.covariance = out, F @ self.covariance @ F.T + Q
+
+    def _measure(self, H: np.ndarray, residual: np.ndarray) -> None:
+        """A whitened linear measurement: rows ``H`` (m, 12) of unit noise, ``residual`` (m,) = measured - H x."""
+        P = self.covariance
+        S = H @ P @ H.T + np.eye(len(H))
+        K = np.linalg.solve(S, H @ P).T
+        A = np.eye(12) - K @ H
+        self.state = self.state + K @ residual
+        self.covariance = A @ P @ A.T + K @ K.T  # (Joseph's form: stays symmetric and positive)
+
+    def _correct(self, position: np.ndarray, information: np.ndarray | None, predicted: np.ndarray | None = None,
+                 prior_eigenvalue: float = 0.0, weak_update: str = "prior") -> None:
+        """The registered IMU origin (3,) as evidence. Along each direction of the registration's translation
+        information (``information`` (3, 3) per match; None: every direction full), w: the position counts with
+        sqrt(min(3 w, 1)) / ``position_std_m`` (1/3 per match is the most one direction can have among three,
+        ``odometry.constraints``). Where the registration was held to its prior (``predicted`` (3,), with
+        information ``prior_eigenvalue`` = lambda per match), only what the data moved it counts: with the prior
+        blended in (``weak_update`` "prior", ``odometry.constraints.remapped_step``) the data's own position is
+        predicted + (w + lambda) / w (position - predicted); a direction kept at the prior ("remap", w < lambda)
+        says nothing. Taking the blend itself would count the prediction, the filter's own or a constant
+        velocity's, as a measurement of the motion."""
+        W, evidence = np.eye(3), np.array(position, dtype=float)
+        if information is not None:
+            w, V = np.linalg.eigh(information)
+            w = np.clip(w, 0.0, None)
+            scale = np.sqrt(np.clip(w * 3.0, 0.0, 1.0))
+            if predicted is not None and prior_eigenvalue > 0:
+                moved = V.T @ (position - predicted)
+                if weak_update == "prior":
+                    moved = moved * (w + prior_eigenvalue) / np.maximum(w, 1e-12)
+                else:
+                    scale = np.where(w < prior_eigenvalue, 0.0, scale)
+                evidence = predicted + V @ moved
+            W = (V * scale) @ V.T
+        W = W / self.params.position_std_m
+        H = np.zeros((3, 12))
+        H[:, _P] = W
+        self._measure(H, W @ (evidence - self.state[_P]))
+
+    def _hold_gravity_magnitude(self) -> None:
+        """Gravity's magnitude is the sensor file's: the mean scaled to it and the covariance kept to the
+        sphere's tangent plane there. (A tight measurement of the magnitude, linearised about each frame's
+        estimate, would constrain a slightly different direction each time and so, over frames, the
+        direction of gravity too: information nobody measured.)"""
+        g = self.state[_G]
+        unit = g / np.linalg.norm(g)
+        self.state[_G] = self.model.gravity_m_s2 * unit
+        Pi = np.eye(12)
+        Pi[_G, _G] -= np.outer(unit, unit)
+        self.covariance = Pi @ self.covariance @ Pi.T
+
     def _fit_gyro_bias(self) -> None:
         """The gyroscope's bias: each segment between registered frames says ``b_s - Log(dR_s^T dR_lidar) / Dt``
         (its rotation integrated with b_s against the registered one); their weighted mean with the last
         estimate as a prior."""
         recs = list(self.records)
         rot_var = math.radians(self.params.rotation_std_deg) ** 2 * 2  # (two poses' errors in each relative rotation)
-        prior_std = max(self.model.gyroscope_turn_on_bias,
-                        self.model.gyroscope_random_walk * math.sqrt(self._window_s()), 1e-7)
+        window_s = recs[-1].time_s - recs[0].time_s
+        prior_std = max(self.model.gyroscope_turn_on_bias, self.model.gyroscope_random_walk * math.sqrt(window_s),
+                        1e-7)
         info, total = 1.0 / prior_std**2, self.gyro_bias / prior_std**2
         for a, b in zip(recs[:-1], recs[1:], strict=True):
             if not (a.usable and b.usable) or b.segment is None:
@@ -281,101 +374,6 @@ class InertialOdometry:
             weight = seg.dt_s**2 / rot_var
             info, total = info + weight, total + weight * said
         self.gyro_bias = total / info
-
-    def _window_s(self) -> float:
-        return self.records[-1].time_s - self.records[0].time_s
-
-    def _initial_gravity(self) -> np.ndarray:
-        """Gravity (world, 3,) from the mean specific force over the window's first segment: the vehicle's own
-        acceleration is the error, which the fit removes."""
-        first, second = self.records[0], self.records[1]
-        s = self.samples.between(self._imu_time(first.time_s), self._imu_time(second.time_s))
-        f = s.specific_force.mean(axis=0) if len(s) else np.array([0.0, 0.0, self.model.gravity_m_s2])
-        f_world = first.pose[:3, :3] @ self.T_lidar_imu[:3, :3] @ f
-        return -self.model.gravity_m_s2 * f_world / max(np.linalg.norm(f_world), 1e-9)
-
-    def _fit_window(self) -> None:
-        """Least squares for x = (p_0, v_0, g, delta b_a) (12,) over the window (module doc), twice (gravity's
-        magnitude is linearised about the estimate)."""
-        recs = list(self.records)
-        first_fit = self.gravity is None or recs[0].velocity is None
-        v_prior = np.zeros(3) if recs[0].velocity is None else recs[0].velocity
-        v_prior_std = 100.0 if first_fit else 0.1
-        # (the constants' prior: the latest fit sharing no frame with this window, module doc)
-        prior = next((f for f in reversed(self.fits) if f.end_time_s < recs[0].time_s), None)
-        if prior is None:  # (gravity from the specific force, loosely; the bias 0)
-            ba_std = max(self.model.accelerometer_turn_on_bias, 1e-3)
-            g_prior, ba_prior = self._initial_gravity(), np.zeros(3)
-            prior_cov = np.diag([1.0] * 3 + [ba_std**2] * 3)
-        else:  # (the bias's random walk since that fit added)
-            walk = self.model.accelerometer_random_walk**2 * (recs[-1].time_s - prior.end_time_s)
-            g_prior, ba_prior = prior.gravity, prior.accel_bias
-            prior_cov = prior.cov + np.diag([0.0] * 3 + [walk] * 3)
-        sigma_p = self.params.position_std_m
-        # The chain: p_k = A_k x + c_k, v_k = B_k x + e_k
-        A, c = np.zeros((3, 12)), np.zeros(3)
-        B, e = np.zeros((3, 12)), np.zeros(3)
-        A[:, 0:3] = np.eye(3)
-        B[:, 3:6] = np.eye(3)
-        chains = [(A.copy(), c.copy(), B.copy(), e.copy())]
-        for prev, rec in zip(recs[:-1], recs[1:], strict=True):
-            seg = rec.segment
-            R = prev.pose[:3, :3] @ self.T_lidar_imu[:3, :3]
-            dt = seg.dt_s
-            dv, dp = seg.corrected(self.accel_bias)
-            A = A + dt * B
-            A[:, 6:9] += 0.5 * dt * dt * np.eye(3)
-            A[:, 9:12] += R @ seg.dp_dba
-            c = c + dt * e + R @ dp
-            B = B.copy()
-            B[:, 6:9] += dt * np.eye(3)
-            B[:, 9:12] += R @ seg.dv_dba
-            e = e + R @ dv
-            chains.append((A.copy(), c.copy(), B.copy(), e.copy()))
-        rows, rhs = [], []
-
-        def add(J: np.ndarray, y: np.ndarray, std: float) -> None:
-            rows.append(J / std)
-            rhs.append(y / std)
-
-        positions = [(r.pose @ self.T_lidar_imu)[:3, 3] for r in recs]
-        add(np.eye(3, 12), positions[0], sigma_p)
-        for rec, (A_k, c_k, _, _), p in zip(recs[1:], chains[1:], positions[1:], strict=True):
-            if not rec.usable:
-                continue
-            # (each direction of the translation scaled by its information: 1/3 per match is the most one
-            # direction can have among three, ``odometry.constraints``; below it the position counts in
-            # proportion, and a direction the registration held to its prior (the prediction) hardly counts)
-            W = np.eye(3)
-            if rec.information is not None:
-                w, V = np.linalg.eigh(rec.information)
-                W = (V * np.sqrt(np.clip(w * 3.0, 0.0, 1.0))) @ V.T
-            add(W @ A_k, W @ (p - c_k), sigma_p)
-        add(np.eye(3, 12, 3), v_prior, v_prior_std)
-        L = np.linalg.cholesky(np.linalg.inv(prior_cov)).T  # (rows whitening the constants' prior)
-        J_prior = np.zeros((6, 12))
-        J_prior[:, 6:12] = L
-        rows.append(J_prior)
-        rhs.append(L @ np.concatenate([g_prior, ba_prior - self.accel_bias]))  # (x holds the bias's change)
-        g = g_prior
-        x = None
-        for _ in range(2):
-            unit = g / np.linalg.norm(g)
-            mag = np.zeros((1, 12))
-            mag[0, 6:9] = unit
-            J = np.vstack([*rows, mag / 1e-3])
-            y = np.concatenate([*rhs, [self.model.gravity_m_s2 / 1e-3]])
-            x = np.linalg.lstsq(J, y, rcond=None)[0]
-            g = x[6:9]
-        B_n, e_n = chains[-1][2], chains[-1][3]
-        for rec, (_, _, B_k, e_k) in zip(recs, chains, strict=True):
-            rec.velocity = B_k @ x + e_k
-        self.velocity = B_n @ x + e_n
-        self.gravity = x[6:9]
-        self.accel_bias = self.accel_bias + x[9:12]
-        self.fits.append(_Constants(recs[-1].time_s, self.gravity.copy(), self.accel_bias.copy(),
-                                    np.linalg.inv(J.T @ J)[6:12, 6:12]))
-        # (the segments keep the bias they were integrated with: ``corrected`` moves them to the new one)
 
 
 __all__ = ["InertialOdometry", "InertialPrediction", "Preintegrated", "preintegrate", "preintegration_error_bound"]

@@ -467,7 +467,10 @@ class Odometry:
             R_world_target = (np.eye(3) if st.local_map is not None or not st.poses
                               else st.poses[st.target_frame][:3, :3])
             info = R_world_target @ diag.translation_information @ R_world_target.T
-        self.inertial.update(pose, st.last_stamp_s, info, not diag.extrapolated)
+        predicted = st.poses[-1] @ frame.T_guess if st.poses else None
+        deg = self.config.degeneracy
+        self.inertial.update(pose, st.last_stamp_s, info, not diag.extrapolated, predicted,
+                             deg.min_constraint_eigenvalue, deg.weak_direction_update)
 
     def conclude(self, frame: FrameInProgress) -> None:
         """The frame's diagnostics: its total time (its preparation's included, wherever that ran), kept
