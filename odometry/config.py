@@ -229,11 +229,11 @@ class ImuParams(_Stage):
     enabled: bool = param(False, "with the sequence's IMU samples: predict each scan's motion and de-skew its sweep "
                           "with the preintegrated gyroscope and accelerometer instead of constant velocity (the "
                           "prior in weakly constrained directions); without samples nothing changes")
-    window_frames: int = param(20, "the sliding window (frames) over which velocity, gravity and the biases are "
-                               "fitted to the registered poses; the IMU predicts once the first window is full",
+    window_frames: int = param(20, "frames the filter of velocity, gravity and the accelerometer's bias takes "
+                               "before the IMU predicts; the window over which the gyroscope's bias is fitted",
                                min=3)
-    position_std_m: float = param(0.02, "the registered positions' standard deviation in the window's fit "
-                                  "(against the biases' priors)", above=0.0)
+    position_std_m: float = param(0.02, "the registered positions' standard deviation in the filter (a direction "
+                                  "with all the information one can have)", above=0.0)
     rotation_std_deg: float = param(0.01, "the registered rotations' standard deviation in the gyroscope bias's "
                                     "fit", above=0.0)
 

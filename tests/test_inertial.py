@@ -158,3 +158,78 @@ def test_on_the_bare_tunnel_the_imu_holds_where_lidar_alone_drifts(tmp_path):
     # lidar alone: metres along the axis by the stretch's end (the braking it cannot see: up to 1.5 m/s^2)
     assert abs(lidar["stretch_along_m"]) > 5.0
     assert imu["stretch_end_m"] < 0.1 * lidar["stretch_end_m"] and imu["t_err_pct"] < lidar["t_err_pct"]
+
+
+def _drive(grade: str, frames: int, seed: int = 1):
+    """The bare tunnel's approach from 2 s (the open road, constant speed): an IMU of ``grade`` at the lidar,
+    and the true lidar poses (frames, 4, 4) every PERIOD_S in the first scan's frame with the truth's
+    velocity at each (frames, 3)."""
+    from simlidar.imu import imu_of_grade, simulate_imu
+
+    trajectory = scenes.build_scene("bare-tunnel", 0).trajectory
+    model = imu_of_grade(grade)
+    samples, truth = simulate_imu(trajectory, model, 2.0, (frames + 1) * PERIOD_S, seed=seed)
+    poses = trajectory.pose_at(2.0 + PERIOD_S * np.arange(frames))
+    poses = np.linalg.inv(poses[0]) @ poses
+    t = PERIOD_S * np.arange(frames)
+    velocity = np.stack([np.interp(t, truth.time_s, truth.velocity[:, i]) for i in range(3)], axis=1)
+    return samples, model, poses, velocity
+
+
+def test_the_filter_finds_the_velocity_from_registered_positions():
+    """Positions as exact as the filter is told (2 cm): once ready (20 frames) its velocity is within a few
+    cm/s of the truth's, and stays there; the gravity it carries has the sensor file's magnitude."""
+    samples, model, poses, velocity = _drive("consumer", 80)
+    io = InertialOdometry(samples, model, ImuParams())
+    errors = []
+    for k, pose in enumerate(poses):
+        io.update(pose, k * PERIOD_S, None, True)
+        assert io.ready == (k >= 20)
+        if io.ready:
+            errors.append(np.linalg.norm(io.velocity - velocity[k]))
+            assert abs(np.linalg.norm(io.gravity) - model.gravity_m_s2) < 1e-9
+    # (a velocity error of e over a 0.1 s frame is e/10 of prediction error; 3 cm/s is 3 mm a frame)
+    assert max(errors) < 0.03
+
+
+def test_positions_without_information_leave_the_motion_unmeasured():
+    """A registration with no information in any direction (open ground everywhere, say) is no evidence:
+    the filter's velocity stays as uncertain as it started and gravity's direction keeps its prior's spread
+    (holding gravity's magnitude adds no information on its direction)."""
+    samples, model, poses, _ = _drive("consumer", 60)
+    io = InertialOdometry(samples, model, ImuParams())
+    for k, pose in enumerate(poses):
+        io.update(pose, k * PERIOD_S, np.zeros((3, 3)), True)
+    P = io.covariance
+    assert np.sqrt(np.diag(P)[3:6]).min() > 50.0  # (started at 100 m/s: nothing measured it)
+    g = io.state[6:9] / np.linalg.norm(io.state[6:9])
+    tangent = np.linalg.eigvalsh(P[6:9, 6:9] - np.outer(g, g) * float(g @ P[6:9, 6:9] @ g))
+    assert tangent[-2:].min() > 0.9  # (the prior's 1 (m/s^2)^2 on each direction across gravity)
+
+
+def test_a_registration_held_to_its_prediction_is_no_evidence():
+    """What the filter takes from a registration is what the data added to the pose it started from: along a
+    direction without information, where the registration stayed at that pose, nothing (a prediction 0.5 m
+    off there changes nothing); along one with information w, blended with the prior's lambda, the data's own
+    position, the prediction plus (w + lambda) / w of the move."""
+    import copy
+
+    samples, model, poses, _ = _drive("consumer", 30)
+    io = InertialOdometry(samples, model, ImuParams())
+    for k in range(25):
+        io.update(poses[k], k * PERIOD_S, None, True)
+    info, lam = np.diag([0.0, 0.02, 0.2]), 0.01  # (per match: nothing along x, weak along y)
+    off_x = poses[25].copy()
+    off_x[0, 3] += 0.5
+    a, b = copy.deepcopy(io), copy.deepcopy(io)
+    a.update(poses[25], 2.5, info, True, T_world_predicted=poses[25], prior_eigenvalue=lam)
+    b.update(off_x, 2.5, info, True, T_world_predicted=off_x, prior_eigenvalue=lam)
+    assert np.allclose(a.state, b.state, atol=1e-12) and np.allclose(a.covariance, b.covariance, atol=1e-15)
+    # (along y: started 0.1 m off the data's position, the registration moved w / (w + lambda) of the way)
+    predicted, moved = poses[25].copy(), poses[25].copy()
+    predicted[1, 3] += 0.1
+    moved[1, 3] += 0.1 - 0.1 * 0.02 / (0.02 + lam)
+    c, d = copy.deepcopy(io), copy.deepcopy(io)
+    c.update(moved, 2.5, info, True, T_world_predicted=predicted, prior_eigenvalue=lam)
+    d.update(poses[25], 2.5, info, True, T_world_predicted=poses[25], prior_eigenvalue=lam)
+    assert np.allclose(c.state, d.state, atol=1e-9)
