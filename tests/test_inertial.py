@@ -131,9 +131,9 @@ def test_the_switch_off_or_no_samples_change_nothing_and_on_the_imu_predicts(roo
     assert np.array_equal(run_sequence(replace(room, imu=None), base.replace(imu={"enabled": True})).poses,
                           lidar_only)  # (on, but the sequence has no IMU)
     with_imu = run_sequence(room, base.replace(imu={"enabled": True, "window_frames": 10}))
-    # (until the first window of 10 frames is fitted: constant velocity; from the 11th frame, the IMU)
-    assert np.array_equal(with_imu.poses[:10], lidar_only[:10])
-    assert not np.array_equal(with_imu.poses[10], lidar_only[10])
+    # (until the filter has taken 10 frames after the first: constant velocity; from the 12th frame, the IMU)
+    assert np.array_equal(with_imu.poses[:11], lidar_only[:11])
+    assert not np.array_equal(with_imu.poses[11], lidar_only[11])
     truth = np.asarray(room.poses)
     truth = np.linalg.inv(truth[0]) @ truth
     for poses in (lidar_only, with_imu.poses):  # (a well-constrained room: the lidar holds either way)
