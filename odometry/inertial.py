@@ -19,22 +19,19 @@ dR_k at the step's middle, a midpoint form of Forster's Euler steps whose error 
 Appendix, the same recursion), so a window's fit moves the accelerometer bias without integrating
 again.
 
-The estimator (``InertialOdometry``): after each scan, a sliding window of the last
-``imu.window_frames`` registered poses is fitted by linear least squares for the IMU's position
-and velocity at the window's start, gravity and the accelerometer's bias: each pose's IMU origin
-is the chain of the preintegrated segments from the start (the poses' own rotations carry each
-segment, so the gyroscope's drift does not enter), against the registered positions. Each direction
-of a frame's position counts by the registration's information in it (a direction held to the
-prediction is no evidence), an extrapolated frame not at all. Priors: the start's position (the
-registered one), velocity (the last fit's, loose before the first), gravity and the bias (the
-latest fit whose window ended before this one's first frame, with the bias's random walk since:
-each frame's evidence counted once; before there is one, gravity along the mean specific force,
-loose, and the bias zero with the turn-on spread) and gravity's magnitude (``gravity_m_s2`` of the
-sensor file's ``imu`` section, tight). Taking the last fit's instead (its window shares all but one
-frame with this one) counts each frame window-length times over: the constants grow certain at
-once and keep what the first windows made of a cold start's registrations for hundreds of frames.
-The gyroscope's bias is a weighted mean of what each segment's rotation, against the registered
-rotations, says it is, with the same kind of prior.
+The estimator (``InertialOdometry``): a Kalman filter over the IMU origin's position and velocity,
+gravity (world) and the accelerometer's bias, linear because the registered rotations carry each
+preintegrated segment (so the gyroscope's drift does not enter). Between scans it propagates with
+the segment (``_propagate``); at each scan it takes the registered position, each direction by the
+registration's information in it and only what the registration added to the pose it started
+from (``_correct``: a direction held to the prediction is no evidence), an extrapolated frame not at
+all; gravity's magnitude is held by projection (``_hold_gravity_magnitude``). Each frame counts
+once: the window's fit this replaced took the last fit as its prior while sharing all but one
+frame with it, so the constants grew certain at once and kept what the first frames made of a cold
+start's registrations for hundreds of frames. The IMU predicts once the filter has taken
+``imu.window_frames`` frames. The gyroscope's bias is a weighted mean of what each segment's
+rotation over the last ``imu.window_frames`` frames, against the registered rotations, says it is,
+with the last estimate as its prior.
 
 The lidar-to-IMU transform, the IMU's clock offset and gravity's magnitude come from the sensor
 file's ``imu`` section (``simlidar.imu.ImuModel``; its defaults when it has none: the IMU at the
@@ -228,8 +225,8 @@ class InertialOdometry:
         return InertialPrediction(motion, se3.inverse(T_world_cur) @ (T_next @ self.T_imu_lidar))
 
     def reset(self) -> None:
-        """Forget the motion (a break in the stamps or the samples): the filter starts again at the next
-        frame, keeping its last gravity and biases only as the mean specific force and zero would."""
+        """Forget the motion (a break in the stamps or the samples): the filter starts again from the next
+        two frames as at the first (``_start``); until it is ready again the IMU does not predict."""
         self.records.clear()
         self.state = self.covariance = self.velocity = None
         self.filtered_frames = 0
@@ -331,12 +328,11 @@ class InertialOdometry:
             w = np.clip(w, 0.0, None)
             scale = np.sqrt(np.clip(w * 3.0, 0.0, 1.0))
             if predicted is not None and prior_eigenvalue > 0:
-                moved = V.T @ (position - predicted)
                 if weak_update == "prior":
-                    moved = moved * (w + prior_eigenvalue) / np.maximum(w, 1e-12)
+                    moved = (V.T @ (position - predicted)) * (w + prior_eigenvalue) / np.maximum(w, 1e-12)
+                    evidence = predicted + V @ moved
                 else:
                     scale = np.where(w < prior_eigenvalue, 0.0, scale)
-                evidence = predicted + V @ moved
             W = (V * scale) @ V.T
         W = W / self.params.position_std_m
         H = np.zeros((3, 12))

@@ -459,8 +459,9 @@ class Odometry:
         frame.seconds[stage] = frame.seconds.get(stage, 0.0) + time.perf_counter() - t
 
     def _update_inertial(self, frame: FrameInProgress, pose: np.ndarray) -> None:
-        """The IMU's window takes the frame's pose (4, 4) (before ``update`` moves the target), with the
-        registration's information on its translation per match, from its target's frame to the world."""
+        """The IMU's filter takes the frame's pose (4, 4) (before ``update`` moves the target), with the
+        registration's information on its translation per match, from its target's frame to the world, and
+        the pose the registration started from (its guess, held to in weak directions)."""
         st, diag = self.state, frame.diag
         info = None
         if np.all(np.isfinite(diag.translation_information)):

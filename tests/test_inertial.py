@@ -195,7 +195,8 @@ def test_the_filter_finds_the_velocity_from_registered_positions():
 def test_positions_without_information_leave_the_motion_unmeasured():
     """A registration with no information in any direction (open ground everywhere, say) is no evidence:
     the filter's velocity stays as uncertain as it started and gravity's direction keeps its prior's spread
-    (holding gravity's magnitude adds no information on its direction)."""
+    across it. (Holding gravity's magnitude by a tight measurement instead of the projection pins its
+    direction only once positions move the estimate: the test above catches that one.)"""
     samples, model, poses, _ = _drive("consumer", 60)
     io = InertialOdometry(samples, model, ImuParams())
     for k, pose in enumerate(poses):
