@@ -461,14 +461,16 @@ class Odometry:
     def _update_inertial(self, frame: FrameInProgress, pose: np.ndarray) -> None:
         """The IMU's filter takes the frame's pose (4, 4) (before ``update`` moves the target), with the
         registration's information on its translation per match, from its target's frame to the world, and
-        the pose the registration started from (its guess, held to in weak directions)."""
+        the pose the registration started from (its guess, held to in weak directions; none at the cold start,
+        whose registration holds to nothing)."""
         st, diag = self.state, frame.diag
         info = None
         if np.all(np.isfinite(diag.translation_information)):
             R_world_target = (np.eye(3) if st.local_map is not None or not st.poses
                               else st.poses[st.target_frame][:3, :3])
             info = R_world_target @ diag.translation_information @ R_world_target.T
-        predicted = st.poses[-1] @ frame.T_guess if st.poses else None
+        # (the cold start, the second scan, holds its registration to no prediction: all it moved is the data's)
+        predicted = st.poses[-1] @ frame.T_guess if len(st.poses) > 1 else None
         deg = self.config.degeneracy
         self.inertial.update(pose, st.last_stamp_s, info, not diag.extrapolated, predicted,
                              deg.min_constraint_eigenvalue, deg.weak_direction_update)

@@ -140,6 +140,24 @@ def test_the_switch_off_or_no_samples_change_nothing_and_on_the_imu_predicts(roo
         assert np.linalg.norm(poses[:, :3, 3] - truth[:, :3, 3], axis=1).max() < 0.05
 
 
+def test_the_cold_start_is_no_prediction_to_the_filter(room, monkeypatch):
+    """The second scan's registration holds to no guess (``motion_prior=False``): the filter takes its whole
+    move as the data's, not as what the data added to a prediction (which the prior's blend would magnify by
+    (w + lambda) / w); every later registration hands over the pose it started from."""
+    calls = []
+    original = InertialOdometry.update
+
+    def recording(self, pose, time_s, information_world, usable, T_world_predicted=None, *args):
+        calls.append(T_world_predicted)
+        return original(self, pose, time_s, information_world, usable, T_world_predicted, *args)
+
+    monkeypatch.setattr(InertialOdometry, "update", recording)
+    run_sequence(room, variant("salo-map").replace(imu={"enabled": True}))
+    assert len(calls) == len(room)
+    assert calls[0] is None and calls[1] is None  # (the first scan, then the cold start)
+    assert all(c is not None and c.shape == (4, 4) for c in calls[2:])
+
+
 @pytest.mark.slow
 def test_on_the_bare_tunnel_the_imu_holds_where_lidar_alone_drifts(tmp_path):
     """The bare tunnel from the open road (2 s) through the braking between bare walls (32 s), salo32 and a
