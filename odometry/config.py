@@ -63,6 +63,14 @@ class CleanParams(_Stage):
     max_range_m: float = param(120.0, "points farther than this are ignored (far noise)", above=0.0)
     kitti_vertical_correction_deg: float = param(
         0.0, "rotate KITTI HDL-64E points about the axis across their beam by this much (0: off; KITTI: 0.205)")
+    drop_isolated: bool = param(False, "drop returns with too few neighbours on their ring within the "
+                                "tolerance in range (fog, rain, snow: odometry/isolation.py) from the points the "
+                                "normals, the ICP and the map are made of; needs the sensor")
+    isolation_columns: int = param(3, "azimuth columns either side of a return looked at for neighbours", min=1)
+    isolation_neighbours: int = param(2, "a return with fewer neighbours than this within the tolerance is alone",
+                                      min=1)
+    isolation_min_m: float = param(0.1, "the range tolerance's least value", above=0.0)
+    isolation_fraction: float = param(0.02, "the range tolerance as a fraction of the return's range", min=0.0)
 
 
 @dataclass(frozen=True)

@@ -87,6 +87,14 @@ LEAVE_PER_BEAM = 0.0005
 # two columns across). Tuning seeds 101-103, every family as real, two scans each: 99.5 % of the weather's
 # poles are narrower, 0.8 % of the structure's.
 MIN_WIDTH_M = 0.05
+# Within the clutter's reach (1.25 times the 99th percentile of the crowded one-return poles' horizontal
+# ranges, once there are MIN_CLUTTER_POLES of them), a one-return pole no other ring sees is the weather's
+# too: fog's backscatter thins out towards its far end, where single returns are as wide as a post and no
+# longer crowded (open ground, os1-64 in light fog, tuning seed 103: the crowded ones' 99th percentile at
+# 7.4 m; about ten a scan kept at 8.2-8.4 m, every one a false return).
+CLUTTER_REACH_QUANTILE = 0.99
+CLUTTER_REACH_MARGIN = 1.25
+MIN_CLUTTER_POLES = 20
 # What clutter is left is sparse and random from scan to scan; a post is where it was. A pole of a
 # cluttered scan is a target of the pole map once a pole of the frame before or after it lies within
 # CONFIRM_RADIUS_M (as the first registration's poles agree on an offset, CONSENSUS_RADIUS_M).
@@ -172,7 +180,7 @@ def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns
         among = crowded(centroids, n_columns) if len(centroids) else np.zeros(0, dtype=bool)
         width_m = counts * np.hypot(centroids[:, 0], centroids[:, 1]) * column_rad
         poles.clutter_per_beam = np.count_nonzero(among & (counts == 1)) / (n_rings * n_columns)
-        poles.suspect = among | (width_m < MIN_WIDTH_M)
+        poles.suspect = among | (width_m < MIN_WIDTH_M) | alone_within_the_clutter(centroids, counts, among, n_columns)
     return poles
 
 
@@ -189,6 +197,37 @@ def crowded(points: np.ndarray, n_columns: int, radius_m: float = ISOLATION_RADI
     azimuth = np.arctan2(xy[:, 1], xy[:, 0])
     other = np.abs(np.angle(np.exp(1j * (azimuth[np.where(near, idx, 0)] - azimuth[:, None]))))
     return np.any(near & (other > same_object_columns * 2.0 * math.pi / n_columns), axis=1)
+
+
+def alone_within_the_clutter(points: np.ndarray, counts: np.ndarray, crowded_poles: np.ndarray,
+                             n_columns: int) -> np.ndarray:
+    """(P,) bool: one-return poles (P, 3) (sensor frame, m) that no other ring sees (``seen_by_another_ring``)
+    and that stand within the clutter's reach: ``CLUTTER_REACH_MARGIN`` times the ``CLUTTER_REACH_QUANTILE`` of the
+    crowded one-return poles' horizontal ranges, when there are at least ``MIN_CLUTTER_POLES`` of them (else none: no clutter to measure).
+    The weather's clutter has a reach (fog's backscatter a few metres; ``crowded_poles`` (P,) bool marks it);
+    a post beyond it, seen on one ring by one return, as far posts are, is left alone."""
+    single = counts == 1
+    crowded_single = crowded_poles & single
+    if np.count_nonzero(crowded_single) < MIN_CLUTTER_POLES:
+        return np.zeros(len(points), dtype=bool)
+    r = np.hypot(points[:, 0], points[:, 1])
+    reach = CLUTTER_REACH_MARGIN * float(np.quantile(r[crowded_single], CLUTTER_REACH_QUANTILE))
+    return single & (r <= reach) & ~seen_by_another_ring(points, n_columns)
+
+
+def seen_by_another_ring(points: np.ndarray, n_columns: int, radius_m: float = CONFIRM_RADIUS_M,
+                         same_object_columns: int = SAME_OBJECT_COLUMNS) -> np.ndarray:
+    """(P,) bool: the poles (P, 3) (sensor frame, m) with another within ``radius_m`` horizontally and within
+    ``same_object_columns`` azimuth columns (of a sweep of ``n_columns``) of its direction: the same upright
+    object on another ring. A one-return pole that is not is a suspect in weather (``ALONE``)."""
+    xy = horizontal(points)
+    k = min(CROWD_NEIGHBOURS + 1, len(xy))
+    dist, idx = KDTree(xy).query(xy, k=k, distance_upper_bound=radius_m)
+    dist, idx = dist.reshape(len(xy), k), idx.reshape(len(xy), k)
+    near = np.isfinite(dist) & (idx != np.arange(len(xy))[:, None])
+    azimuth = np.arctan2(xy[:, 1], xy[:, 0])
+    other = np.abs(np.angle(np.exp(1j * (azimuth[np.where(near, idx, 0)] - azimuth[:, None]))))
+    return np.any(near & (other <= same_object_columns * 2.0 * math.pi / n_columns), axis=1)
 
 
 @dataclass

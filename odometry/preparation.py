@@ -1,6 +1,7 @@
 """The registration's first stage, which reads no state: clean a scan and filter it as measured.
 
-clean     drop non-finite points and points outside the range limits (KITTI's angle fix)
+clean     drop non-finite points and points outside the range limits (KITTI's angle fix); with
+          ``clean.drop_isolated``, returns alone on their ring leave the surfaces (``odometry.isolation``)
 filter    voxel grid -> kNN normals in the raw scan -> NCF -> curvature (``odometry.filters``)
 poles     narrow objects clear of their background (``odometry.poles``; the map variants)
 
@@ -26,6 +27,7 @@ from .config import OdometryConfig
 from .diagnostics import FrameDiagnostics
 from .filters import FilteredScan, filter_scan
 from .gcr import correct_kitti_vertical_angle, ring_of_points
+from .isolation import isolated_returns
 from .poles import extract_poles
 
 
@@ -108,7 +110,21 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
     if clean.rings is None and rings_needed and with_normals and sensor is not None:
         clean.rings = ring_of_points(clean.points, sensor)
     times = clean.times_s if deskewing else None
-    scan = filter_scan(clean.points, config, clean.rings, sensor, raw_times_s=times, with_normals=with_normals)
+    surface, surface_times, surface_rings, isolated = clean.points, times, clean.rings, 0
+    if config.clean.drop_isolated and sensor is not None:
+        rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
+        c = config.clean
+        alone = isolated_returns(clean.points, rings, sensor.rings, sensor.columns_per_sweep, c.isolation_columns,
+                                 c.isolation_neighbours, c.isolation_min_m, c.isolation_fraction)
+        isolated = int(alone.sum())
+        if isolated:
+            kept = ~alone
+            surface = np.compress(kept, clean.points, axis=0)
+            surface_times = None if times is None else times[kept]
+            surface_rings = None if clean.rings is None else clean.rings[kept]
+    scan = filter_scan(surface, config, surface_rings, sensor, raw_times_s=surface_times, with_normals=with_normals)
+    if config.clean.drop_isolated:
+        scan.counts["isolated"] = isolated
     if with_poles:
         t = time.perf_counter()
         rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
