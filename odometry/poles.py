@@ -202,10 +202,11 @@ def crowded(points: np.ndarray, n_columns: int, radius_m: float = ISOLATION_RADI
 def alone_within_the_clutter(points: np.ndarray, counts: np.ndarray, crowded_poles: np.ndarray,
                              n_columns: int) -> np.ndarray:
     """(P,) bool: one-return poles (P, 3) (sensor frame, m) that no other ring sees (``seen_by_another_ring``)
-    and that stand within the clutter's reach: ``CLUTTER_REACH_MARGIN`` times the ``CLUTTER_REACH_QUANTILE`` of the
-    crowded one-return poles' horizontal ranges, when there are at least ``MIN_CLUTTER_POLES`` of them (else none: no clutter to measure).
-    The weather's clutter has a reach (fog's backscatter a few metres; ``crowded_poles`` (P,) bool marks it);
-    a post beyond it, seen on one ring by one return, as far posts are, is left alone."""
+    and that stand within the clutter's reach: ``CLUTTER_REACH_MARGIN`` times the ``CLUTTER_REACH_QUANTILE``
+    of the crowded one-return poles' horizontal ranges, when there are at least ``MIN_CLUTTER_POLES`` of
+    them (else none: no clutter to measure). The weather's clutter has a reach (fog's backscatter a few
+    metres; ``crowded_poles`` (P,) bool marks it); a post beyond it, seen on one ring by one return, as far
+    posts are, is left alone."""
     single = counts == 1
     crowded_single = crowded_poles & single
     if np.count_nonzero(crowded_single) < MIN_CLUTTER_POLES:
