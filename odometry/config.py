@@ -63,10 +63,11 @@ class CleanParams(_Stage):
     max_range_m: float = param(120.0, "points farther than this are ignored (far noise)", above=0.0)
     kitti_vertical_correction_deg: float = param(
         0.0, "rotate KITTI HDL-64E points about the axis across their beam by this much (0: off; KITTI: 0.205)")
-    drop_isolated: bool = param(False, "drop returns with too few neighbours on their ring within the "
-                                "tolerance in range (fog, rain, snow: odometry/isolation.py) from the points the "
-                                "normals, the ICP and the map are made of; needs the sensor")
-    isolation_columns: int = param(3, "azimuth columns either side of a return looked at for neighbours", min=1)
+    drop_isolated: bool = param(False, "drop returns too few of whose neighbouring beams end within the tolerance "
+                                "of them (fog, rain, snow: odometry/isolation.py) from the points the normals, "
+                                "the ICP and the map are made of")
+    isolation_columns: int = param(3, "azimuth columns either side of a return on its ring looked at (and 2 x this "
+                                   "+ 2 nearest beams in direction for the returns that look leaves)", min=1)
     isolation_neighbours: int = param(2, "a return with fewer neighbours than this within the tolerance is alone",
                                       min=1)
     isolation_min_m: float = param(0.1, "the range tolerance's least value", above=0.0)

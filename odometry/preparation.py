@@ -1,7 +1,7 @@
 """The registration's first stage, which reads no state: clean a scan and filter it as measured.
 
 clean     drop non-finite points and points outside the range limits (KITTI's angle fix); with
-          ``clean.drop_isolated``, returns alone on their ring leave the surfaces (``odometry.isolation``)
+          ``clean.drop_isolated``, returns alone in the air leave the surfaces (``odometry.isolation``)
 filter    voxel grid -> kNN normals in the raw scan -> NCF -> curvature (``odometry.filters``)
 poles     narrow objects clear of their background (``odometry.poles``; the map variants)
 
@@ -111,10 +111,14 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
         clean.rings = ring_of_points(clean.points, sensor)
     times = clean.times_s if deskewing else None
     surface, surface_times, surface_rings, isolated = clean.points, times, clean.rings, 0
-    if config.clean.drop_isolated and sensor is not None:
-        rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
+    if config.clean.drop_isolated:
         c = config.clean
-        alone = isolated_returns(clean.points, rings, sensor.rings, sensor.columns_per_sweep, c.isolation_columns,
+        if sensor is not None:
+            rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
+            n_rings, n_columns = sensor.rings, sensor.columns_per_sweep
+        else:  # (no range image: every return judged by its nearest beams in direction)
+            rings, n_rings, n_columns = None, 0, 0
+        alone = isolated_returns(clean.points, rings, n_rings, n_columns, c.isolation_columns,
                                  c.isolation_neighbours, c.isolation_min_m, c.isolation_fraction)
         isolated = int(alone.sum())
         if isolated:

@@ -1,9 +1,10 @@
-"""Returns alone on their ring (odometry/isolation.py) against the truth's weather flags: in fog and snow
-nearly every weather return is alone and few surface returns are (fewer than one in ten: a surface whose
-neighbouring beams ended in the air loses its neighbours); in clear air a few in a hundred (edges, foliage,
-beside dropouts); and the preparation keeps them out of the points its normals, the ICP and the map are made
-of, not out of the poles'. (Seed 7, on 2026-12-07: weather alone 99.2-99.8 %, surfaces alone 3.0 % in light
-fog, 8.4 % dense fog, 6.6 % snow; clear air 2.3 % city, 5.6 % forest.)"""
+"""Returns alone in the air (odometry/isolation.py) against the truth's weather flags: in fog and snow
+nearly every weather return is alone and few surface returns are (a surface whose neighbouring beams ended in
+the air loses its neighbours); in clear air and on real scans, whose rings are inferred from a table that
+does not quite match the sensor, under one in a hundred; and the preparation keeps them out of the points
+its normals, the ICP and the map are made of, not out of the poles'. (Seed 7, on 2026-12-07: weather alone
+97.0-99.1 %, surfaces alone 0.6 % in light fog, 3.7 % dense fog, 1.9 % snow; clear air 0.2 % city, 1.0 %
+forest; KITTI 05 1.5 %.)"""
 
 from __future__ import annotations
 
@@ -42,19 +43,19 @@ def test_the_weathers_returns_are_alone_and_the_surfaces_are_not(condition, fami
     frame, weather, sensor = _weather_frame(condition, family)
     alone = _alone(frame, sensor)
     assert weather.sum() > 1000
-    assert alone[weather].mean() > 0.98  # (two chance neighbours within a tolerance: rare)
-    assert alone[~weather].mean() < 0.1
+    assert alone[weather].mean() > 0.95  # (two chance neighbours within a tolerance: rare)
+    assert alone[~weather].mean() < 0.05
 
 
 @pytest.mark.slow
 def test_in_clear_air_almost_nothing_is_alone_and_the_preparation_drops_it_from_the_surfaces_only():
     frame, weather, sensor = _weather_frame("clear", "city")
     assert not weather.any()
-    assert _alone(frame, sensor).mean() < 0.05
+    assert _alone(frame, sensor).mean() < 0.01
     config = variant("salo-map")
     off = prepare_scan(frame.points, None, None, config, sensor, True, True)
     on = prepare_scan(frame.points, None, None, config.replace(clean=ON), sensor, True, True)
-    assert 0 < on.scan.counts["isolated"] < 0.05 * len(off.clean.points)
+    assert 0 < on.scan.counts["isolated"] < 0.01 * len(off.clean.points)
     assert np.array_equal(on.scan.poles.points, off.scan.poles.points)  # (the poles see the whole scan)
     assert len(on.scan.raw_points) == len(off.scan.raw_points) - on.scan.counts["isolated"]
 
@@ -71,3 +72,23 @@ def test_a_surface_is_kept_and_a_return_alone_in_the_air_is_dropped():
     points = np.stack([r * np.cos(az), r * np.sin(az), np.zeros(columns)], axis=1)[keep]
     alone = isolated_returns(points, np.zeros(len(points), dtype=int), 1, columns, 3, 2, 0.1, 0.02)
     assert np.flatnonzero(alone).tolist() == [100]
+
+
+@pytest.mark.parametrize("folder, sensor", [("kitti/sequences/05", "hdl64e"), ("hdl32-pair", "hdl32e")])
+def test_a_real_scan_in_clear_air_is_hardly_alone(real_data, folder, sensor):
+    """Real scans (an urban KITTI street, whose HDL-64E rings inferred from the preset's elevations split a
+    laser's returns over two rows; the HDL-32E pair): under 3 % of their returns are alone."""
+    from odometry.gcr import correct_kitti_vertical_angle, ring_of_points
+    from simlidar.dataset import open_sequence
+    from simlidar.sensor import load_preset
+
+    lidar = load_preset(sensor)
+    points = open_sequence(real_data / folder, sensor=sensor)[0].points.astype(np.float64)
+    r = np.linalg.norm(points, axis=1)
+    points = points[(r > 2.5) & (r < 120.0)]
+    if sensor == "hdl64e":
+        points = correct_kitti_vertical_angle(points, 0.205)
+    c = variant("salo-map").replace(clean=ON).clean
+    alone = isolated_returns(points, ring_of_points(points, lidar), lidar.rings, lidar.columns_per_sweep,
+                             c.isolation_columns, c.isolation_neighbours, c.isolation_min_m, c.isolation_fraction)
+    assert alone.mean() < 0.03
