@@ -189,14 +189,20 @@ def crowded(points: np.ndarray, n_columns: int, radius_m: float = ISOLATION_RADI
     """(P,) bool: the poles (P, 3) (sensor frame, m) with another within ``radius_m`` horizontally that is not
     the same object seen by another ring (more than ``same_object_columns`` azimuth columns of a sweep
     of ``n_columns`` away in direction). Among a pole's ``CROWD_NEIGHBOURS`` nearest."""
+    near, turn = _horizontal_neighbours(points, radius_m)
+    return np.any(near & (turn > same_object_columns * 2.0 * math.pi / n_columns), axis=1)
+
+
+def _horizontal_neighbours(points: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each pole's (P, 3) other poles within ``radius_m`` horizontally, among its ``CROWD_NEIGHBOURS`` nearest:
+    (P, k) bool, which slots hold one, and (P, k) the angle between their directions from the sensor, rad."""
     xy = horizontal(points)
     k = min(CROWD_NEIGHBOURS + 1, len(xy))
     dist, idx = KDTree(xy).query(xy, k=k, distance_upper_bound=radius_m)
     dist, idx = dist.reshape(len(xy), k), idx.reshape(len(xy), k)
     near = np.isfinite(dist) & (idx != np.arange(len(xy))[:, None])
     azimuth = np.arctan2(xy[:, 1], xy[:, 0])
-    other = np.abs(np.angle(np.exp(1j * (azimuth[np.where(near, idx, 0)] - azimuth[:, None]))))
-    return np.any(near & (other > same_object_columns * 2.0 * math.pi / n_columns), axis=1)
+    return near, np.abs(np.angle(np.exp(1j * (azimuth[np.where(near, idx, 0)] - azimuth[:, None]))))
 
 
 def alone_within_the_clutter(points: np.ndarray, counts: np.ndarray, crowded_poles: np.ndarray,
@@ -220,15 +226,9 @@ def seen_by_another_ring(points: np.ndarray, n_columns: int, radius_m: float = C
                          same_object_columns: int = SAME_OBJECT_COLUMNS) -> np.ndarray:
     """(P,) bool: the poles (P, 3) (sensor frame, m) with another within ``radius_m`` horizontally and within
     ``same_object_columns`` azimuth columns (of a sweep of ``n_columns``) of its direction: the same upright
-    object on another ring. A one-return pole that is not is a suspect in weather (``ALONE``)."""
-    xy = horizontal(points)
-    k = min(CROWD_NEIGHBOURS + 1, len(xy))
-    dist, idx = KDTree(xy).query(xy, k=k, distance_upper_bound=radius_m)
-    dist, idx = dist.reshape(len(xy), k), idx.reshape(len(xy), k)
-    near = np.isfinite(dist) & (idx != np.arange(len(xy))[:, None])
-    azimuth = np.arctan2(xy[:, 1], xy[:, 0])
-    other = np.abs(np.angle(np.exp(1j * (azimuth[np.where(near, idx, 0)] - azimuth[:, None]))))
-    return np.any(near & (other <= same_object_columns * 2.0 * math.pi / n_columns), axis=1)
+    object on another ring. A one-return pole that is not may be the weather's (``alone_within_the_clutter``)."""
+    near, turn = _horizontal_neighbours(points, radius_m)
+    return np.any(near & (turn <= same_object_columns * 2.0 * math.pi / n_columns), axis=1)
 
 
 @dataclass

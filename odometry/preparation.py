@@ -110,15 +110,16 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
     if clean.rings is None and rings_needed and with_normals and sensor is not None:
         clean.rings = ring_of_points(clean.points, sensor)
     times = clean.times_s if deskewing else None
+    # (the range image's rows, inferred once for the isolation and the poles when the scan has no ring field)
+    image_rings = clean.rings
+    if image_rings is None and sensor is not None and (with_poles or config.clean.drop_isolated):
+        image_rings = ring_of_points(clean.points, sensor)
     surface, surface_times, surface_rings, isolated = clean.points, times, clean.rings, 0
     if config.clean.drop_isolated:
         c = config.clean
-        if sensor is not None:
-            rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
-            n_rings, n_columns = sensor.rings, sensor.columns_per_sweep
-        else:  # (no range image: every return judged by its nearest beams in direction)
-            rings, n_rings, n_columns = None, 0, 0
-        alone = isolated_returns(clean.points, rings, n_rings, n_columns, c.isolation_columns,
+        # (without a sensor, no range image: every return judged by its nearest beams in direction)
+        n_rings, n_columns = (sensor.rings, sensor.columns_per_sweep) if sensor is not None else (0, 0)
+        alone = isolated_returns(clean.points, image_rings, n_rings, n_columns, c.isolation_columns,
                                  c.isolation_neighbours, c.isolation_min_m, c.isolation_fraction)
         isolated = int(alone.sum())
         if isolated:
@@ -131,8 +132,7 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
         scan.counts["isolated"] = isolated
     if with_poles:
         t = time.perf_counter()
-        rings = clean.rings if clean.rings is not None else ring_of_points(clean.points, sensor)
-        scan.poles = extract_poles(clean.points, rings, sensor.rings, sensor.columns_per_sweep,
+        scan.poles = extract_poles(clean.points, image_rings, sensor.rings, sensor.columns_per_sweep,
                                    config.poles.max_width_m, times, clutter_filter=config.poles.clutter_filter)
         scan.counts["poles"] = len(scan.poles)
         scan.seconds["poles"] = time.perf_counter() - t

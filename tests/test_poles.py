@@ -18,6 +18,7 @@ from odometry.poles import (
     PoleMap,
     PoleTarget,
     WeatherGate,
+    alone_within_the_clutter,
     crowded,
     extract_poles,
     pole_rows,
@@ -320,3 +321,28 @@ def test_the_odometry_drops_the_weathers_poles_on_scans_in_weather_only():
         dropped[spec.weather] = [d.filter_counts["poles_weather"] for d in run.diagnostics]
     assert dropped["clear"] == [0, 0, 0]
     assert all(n > 100 for n in dropped["dense-fog"]), dropped
+
+
+def test_a_lone_single_return_is_a_suspect_only_within_the_clutters_reach():
+    """Crowded one-return clutter out to 6 m (pairs 0.1-0.3 m apart, apart in direction): a single return at
+    7 m that no other ring sees is within its reach (1.25 x its 99th percentile) and a suspect; the same
+    with a pole of another ring beside it (the same post), a single return at 30 m (a far post), and a
+    two-return run at 7 m are not; with fewer than 20 crowded returns there is no reach to measure."""
+    n_columns = 1800
+    rng = np.random.default_rng(4)
+    az = rng.uniform(-np.pi, np.pi, 40)
+    r = rng.uniform(2.0, 6.0, 40)
+    clutter = np.stack([r * np.cos(az), r * np.sin(az), np.zeros(40)], axis=1)
+    partners = clutter.copy()  # (0.1-0.3 m away at 0.05 rad, beyond the same object's three columns)
+    partners[:, :2] = np.stack([np.cos(az + 0.05), np.sin(az + 0.05)], axis=1) * r[:, None]
+    lone = np.array([[7.0, 0.0, 0.0], [0.0, 7.0, 0.0], [0.0, 7.0, 1.0], [-30.0, 0.0, 0.0], [0.0, -7.0, 0.0]])
+    points = np.vstack([clutter, partners, lone])
+    counts = np.ones(len(points), dtype=int)
+    counts[-1] = 2
+    among = crowded(points, n_columns)
+    assert among[:80].sum() >= 20 and not among[80:].any()
+    suspect = alone_within_the_clutter(points, counts, among, n_columns)
+    assert suspect[80] and not suspect[81:].any()  # (81, 82: one post on two rings; 83: far; 84: two returns)
+    few = np.zeros(len(points), dtype=bool)
+    few[:19] = True
+    assert not alone_within_the_clutter(points, counts, few, n_columns).any()
