@@ -11,8 +11,11 @@ sensor. (The poles are found in the full scan: a post one column wide is alone o
 poles stage has its own weather filter.)
 
 Two looks. First the range image: the ``columns`` azimuth columns either side on the return's own
-ring; a return with ``neighbours`` of them within the tolerance is not alone (cheap, and it settles
-most of a clear scan). The rest are judged by their nearest beams in direction (a k-d tree over the
+ring; a return with ``neighbours`` of them within the tolerance is not alone, nor one on a smooth run of
+four columns of its ring (every second difference of their ranges within its tolerance: a wall seen at
+grazing incidence, 20-80 m along a tunnel, changes range by more than the tolerance a column, steadily;
+without the run 13-36 % of those returns were alone, in clear air). Compiled, it settles most of a scan.
+The rest are judged by their nearest beams in direction (a k-d tree over the
 unit vectors, ``2 columns + 2`` of them: the ring's and the rings' beside it), whatever ring they
 were given: rings inferred from elevations a sensor's table does not quite match (KITTI's HDL-64E)
 split a laser's returns over two rows, and there 12-17 % of the returns found no neighbour on their
@@ -26,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kdtree import KDTree
+from .kernels.isolation import alone_on_ring
 from .scan_lines import azimuth_columns
 
 
@@ -46,16 +50,9 @@ def isolated_returns(points: np.ndarray, rings: np.ndarray | None, n_rings: int,
     tolerance = np.maximum(min_m, fraction * ranges)
     candidate = np.ones(n, dtype=bool)
     if rings is not None:
-        rings = np.asarray(rings, dtype=np.int64)
         cols = azimuth_columns(points, n_columns)
-        image = np.full((n_rings, n_columns), np.nan)
-        image[rings, cols] = ranges  # (a cell holding two returns keeps one; the other is judged by the k-d tree)
-        found = np.zeros(n, dtype=np.int64)
-        for step in range(1, columns + 1):
-            for side in (-step, step):
-                # (nan, no return there, compares False: an empty cell is no neighbour)
-                found += np.abs(image[rings, (cols + side) % n_columns] - ranges) <= tolerance
-        candidate = found < neighbours
+        candidate = alone_on_ring(np.asarray(rings, dtype=np.int64), cols, ranges, tolerance, n_rings, n_columns,
+                                  columns, neighbours)
     alone = np.zeros(n, dtype=bool)
     rows = np.flatnonzero(candidate)
     k = min(2 * columns + 2, n - 1)

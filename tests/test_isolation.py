@@ -74,6 +74,25 @@ def test_a_surface_is_kept_and_a_return_alone_in_the_air_is_dropped():
     assert np.flatnonzero(alone).tolist() == [100]
 
 
+def test_a_wall_seen_at_grazing_incidence_is_kept_and_a_flake_in_front_of_it_is_not():
+    """A ring's returns off a straight wall 5 m to the side, out to 60 m along it (incidence up to 85 deg, the
+    range changing by up to 0.9 m a column of 0.2 deg, more than the tolerance): a smooth run, kept; a flake
+    at 7 m on one of its beams, and one at 40.5 m out among the far returns, are alone."""
+    columns = 1800
+    az = (np.arange(columns) + 0.5) * 2 * np.pi / columns - np.pi
+    on_wall = (az > np.arctan2(5.0, 60.0)) & (az < np.pi / 2)
+    r = 5.0 / np.sin(az[on_wall])
+    step = np.abs(np.diff(r))
+    assert step.max() > np.maximum(0.1, 0.02 * r[1:]).max()
+    flakes = {100: 7.0, 30: 40.5}
+    for i, flake_r in flakes.items():
+        r[i] = flake_r
+    a = az[on_wall]
+    points = np.stack([r * np.cos(a), r * np.sin(a), np.zeros(len(r))], axis=1)
+    alone = isolated_returns(points, np.zeros(len(points), dtype=int), 1, columns, 3, 2, 0.1, 0.02)
+    assert sorted(np.flatnonzero(alone).tolist()) == sorted(flakes)
+
+
 @pytest.mark.parametrize("folder, sensor", [("kitti/sequences/05", "hdl64e"), ("hdl32-pair", "hdl32e")])
 def test_a_real_scan_in_clear_air_is_hardly_alone(real_data, folder, sensor):
     """Real scans (an urban KITTI street, whose HDL-64E rings inferred from the preset's elevations split a
