@@ -66,6 +66,9 @@ class CleanParams(_Stage):
     drop_isolated: bool = param(False, "drop returns too few of whose neighbouring beams end within the tolerance "
                                 "of them (fog, rain, snow: odometry/isolation.py) from the points the normals, "
                                 "the ICP and the map are made of")
+    isolated_only_in_weather: bool = param(
+        True, "drop them only from a scan the poles' clutter statistic takes as in weather (more crowded "
+        "one-return poles per beam than the poles' gate, odometry/poles.py): a clear scan keeps every return")
     isolation_columns: int = param(3, "azimuth columns either side of a return on its ring looked at (and 2 x this "
                                    "+ 2 nearest beams in direction for the returns that look leaves)", min=1)
     isolation_neighbours: int = param(2, "a return with fewer neighbours than this within the tolerance is alone",

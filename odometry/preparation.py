@@ -1,7 +1,8 @@
 """The registration's first stage, which reads no state: clean a scan and filter it as measured.
 
 clean     drop non-finite points and points outside the range limits (KITTI's angle fix); with
-          ``clean.drop_isolated``, returns alone in the air leave the surfaces (``odometry.isolation``)
+          ``clean.drop_isolated``, returns alone in the air leave the surfaces (``odometry.isolation``;
+          only on a scan in weather by the poles' clutter statistic, ``clean.isolated_only_in_weather``)
 filter    voxel grid -> kNN normals in the raw scan -> NCF -> curvature (``odometry.filters``)
 poles     narrow objects clear of their background (``odometry.poles``; the map variants)
 
@@ -28,7 +29,7 @@ from .diagnostics import FrameDiagnostics
 from .filters import FilteredScan, filter_scan
 from .gcr import correct_kitti_vertical_angle, ring_of_points
 from .isolation import isolated_returns
-from .poles import extract_poles
+from .poles import CLUTTERED_PER_BEAM, extract_poles
 
 
 @dataclass
@@ -114,8 +115,16 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
     image_rings = clean.rings
     if image_rings is None and sensor is not None and (with_poles or config.clean.drop_isolated):
         image_rings = ring_of_points(clean.points, sensor)
+    # (the isolation in weather only waits for the poles' clutter statistic; they are found in the whole scan)
+    gated = config.clean.drop_isolated and config.clean.isolated_only_in_weather and sensor is not None
+    poles, poles_seconds = None, 0.0
+    if with_poles or gated:
+        t = time.perf_counter()
+        poles = extract_poles(clean.points, image_rings, sensor.rings, sensor.columns_per_sweep,
+                              config.poles.max_width_m, times, clutter_filter=config.poles.clutter_filter or gated)
+        poles_seconds = time.perf_counter() - t
     surface, surface_times, surface_rings, isolated = clean.points, times, clean.rings, 0
-    if config.clean.drop_isolated:
+    if config.clean.drop_isolated and not (gated and poles.clutter_per_beam <= CLUTTERED_PER_BEAM):
         c = config.clean
         # (without a sensor, no range image: every return judged by its nearest beams in direction)
         n_rings, n_columns = (sensor.rings, sensor.columns_per_sweep) if sensor is not None else (0, 0)
@@ -131,10 +140,8 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
     if config.clean.drop_isolated:
         scan.counts["isolated"] = isolated
     if with_poles:
-        t = time.perf_counter()
-        scan.poles = extract_poles(clean.points, image_rings, sensor.rings, sensor.columns_per_sweep,
-                                   config.poles.max_width_m, times, clutter_filter=config.poles.clutter_filter)
+        scan.poles = poles
         scan.counts["poles"] = len(scan.poles)
-        scan.seconds["poles"] = time.perf_counter() - t
+        scan.seconds["poles"] = poles_seconds
     diag.filter_counts = scan.counts
     return PreparedScan(clean, scan, deskewing, diag, dict(scan.seconds), time.perf_counter() - t_start)

@@ -54,10 +54,30 @@ def test_in_clear_air_almost_nothing_is_alone_and_the_preparation_drops_it_from_
     assert _alone(frame, sensor).mean() < 0.01
     config = variant("salo-map")
     off = prepare_scan(frame.points, None, None, config, sensor, True, True)
-    on = prepare_scan(frame.points, None, None, config.replace(clean=ON), sensor, True, True)
+    everywhere = config.replace(clean={**ON, "isolated_only_in_weather": False})
+    on = prepare_scan(frame.points, None, None, everywhere, sensor, True, True)
     assert 0 < on.scan.counts["isolated"] < 0.01 * len(off.clean.points)
     assert np.array_equal(on.scan.poles.points, off.scan.poles.points)  # (the poles see the whole scan)
     assert len(on.scan.raw_points) == len(off.scan.raw_points) - on.scan.counts["isolated"]
+    # (in weather only, the default: the poles' clutter statistic says clear air, and every return stays)
+    gated = prepare_scan(frame.points, None, None, config.replace(clean=ON), sensor, True, True)
+    assert gated.scan.counts["isolated"] == 0
+    assert np.array_equal(gated.scan.raw_points, off.scan.raw_points)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("with_poles", [True, False])
+def test_in_fog_the_gate_opens_and_the_weathers_returns_leave_the_surfaces(with_poles):
+    """A scan in dense fog, its poles found or not (a variant without them measures their clutter all the same):
+    the gate takes it as in weather, and the alone returns, nearly all of them the fog's, leave."""
+    frame, weather, sensor = _weather_frame("dense-fog", "city")
+    config = variant("salo-map").replace(clean=ON)
+    prepared = prepare_scan(frame.points, None, None, config, sensor, True, with_poles)
+    dropped = prepared.scan.counts["isolated"]
+    r = np.linalg.norm(frame.points, axis=1)
+    kept = (r >= config.clean.min_range_m) & (r <= config.clean.max_range_m)  # (what the cleaning leaves)
+    fog, surfaces = np.count_nonzero(weather & kept), np.count_nonzero(~weather & kept)
+    assert 0.95 * fog < dropped < fog + 0.05 * surfaces
 
 
 def test_a_surface_is_kept_and_a_return_alone_in_the_air_is_dropped():
