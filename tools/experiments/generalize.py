@@ -485,8 +485,13 @@ def write_generalize(results: list[dict], params: GeneralizeParams, record: RunR
                      fmt(r.get("t_eig0_median"), ".4f"), *cells])
     lines.append(markdown_table(header, body))
     record.write_text("summary.md", "\n".join(lines) + "\n")
+    weathers = sorted({r["sequence"].get("weather") or "clear" for r in results})
+    note = "; ".join(
+        ([f"our methods with {', '.join(f'{k}={value_text(v)}' for k, v in params.config_overrides.items())}"]
+         if params.config_overrides else [])
+        + ([f"each bar pools the weathers {', '.join(weathers)}"] if len(weathers) > 1 else []))
     plots.family_error_plot(record.path("t_err_per_family.png"), results, methods, method_label,
-                            FAILURE_T_ERR_PCT)
+                            FAILURE_T_ERR_PCT, note)
     tracks = []
     for r in results:
         if "gt" not in r:

@@ -294,11 +294,13 @@ def _noise_colors(noises) -> dict:
     return {v: palette[i % len(palette)] for i, v in enumerate(noises)}
 
 
-def family_error_plot(path, results: list[dict], methods: tuple[str, ...], label, failure_pct: float) -> Path:
+def family_error_plot(path, results: list[dict], methods: tuple[str, ...], label, failure_pct: float,
+                      note: str = "") -> Path:
     """KITTI t_err per scene family and method, one panel per data kind (log scale).
 
     results: the generalisation suite's per-sequence results; a bar is the mean over the
     family's sequences, each dot one sequence; the dashed line is the failure threshold.
+    note: a line above the panels (what the run changed, what a bar pools).
     """
     kinds = sorted({r["sequence"]["kind"] for r in results})
     families = sorted({r["sequence"]["family"] for r in results})
@@ -332,4 +334,6 @@ def family_error_plot(path, results: list[dict], methods: tuple[str, ...], label
     axes[-1].set_xticks(range(len(families)), families)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 5), fontsize=9)
+    if note:
+        fig.suptitle(note, fontsize=9)
     return save_png(fig, path)
