@@ -169,6 +169,9 @@ class PolesParams(_Stage):
                                  "must stand clear of other poles and be as wide as a post, and is matched against "
                                  "once a pole of the frame before or after it confirms it; a clear scan's poles are "
                                  "kept as they are (odometry/poles.py)")
+    clutter_reach: bool = param(True, "in weather, a one-return pole no other ring sees is taken for the weather's "
+                                "only within the clutter's reach (1.25 x the 99th percentile of the crowded one-return "
+                                "poles' ranges); false: at any range (snow reaches beyond where it is crowded)")
 
 
 @dataclass(frozen=True)

@@ -159,7 +159,7 @@ class WeatherGate:
 
 
 def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns: int, max_width_m: float,
-                  times_s: np.ndarray | None = None, clutter_filter: bool = False) -> Poles:
+                  times_s: np.ndarray | None = None, clutter_filter: bool = False, clutter_reach: bool = True) -> Poles:
     """The poles of a raw scan (module doc).
 
     points: (N, 3) as measured (or de-skewed), sensor frame, m; rings: (N,) int, 0 the lowest;
@@ -167,6 +167,7 @@ def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns
     run kept, m; times_s: (N,) firing times, s, or None. clutter_filter: measure ``clutter_per_beam`` (one-return
     poles ``crowded`` among others, per beam) and mark the ``suspect`` poles; what is dropped depends on the
     scans before (``WeatherGate``, ``Poles.without_suspects``): the caller's, which alone sees a sequence.
+    clutter_reach: ``alone_within_the_clutter`` looks only within the clutter's reach (else at any range).
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     image = range_image(rings, points, n_rings, n_columns)
@@ -180,7 +181,8 @@ def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns
         among = crowded(centroids, n_columns) if len(centroids) else np.zeros(0, dtype=bool)
         width_m = counts * np.hypot(centroids[:, 0], centroids[:, 1]) * column_rad
         poles.clutter_per_beam = np.count_nonzero(among & (counts == 1)) / (n_rings * n_columns)
-        poles.suspect = among | (width_m < MIN_WIDTH_M) | alone_within_the_clutter(centroids, counts, among, n_columns)
+        poles.suspect = among | (width_m < MIN_WIDTH_M) | alone_within_the_clutter(centroids, counts, among, n_columns,
+                                                                                    clutter_reach)
     return poles
 
 
@@ -206,19 +208,22 @@ def _horizontal_neighbours(points: np.ndarray, radius_m: float) -> tuple[np.ndar
 
 
 def alone_within_the_clutter(points: np.ndarray, counts: np.ndarray, crowded_poles: np.ndarray,
-                             n_columns: int) -> np.ndarray:
+                             n_columns: int, within_reach: bool = True) -> np.ndarray:
     """(P,) bool: one-return poles (P, 3) (sensor frame, m) that no other ring sees (``seen_by_another_ring``)
     and that stand within the clutter's reach: ``CLUTTER_REACH_MARGIN`` times the ``CLUTTER_REACH_QUANTILE``
     of the crowded one-return poles' horizontal ranges, when there are at least ``MIN_CLUTTER_POLES`` of
     them (else none: no clutter to measure). The weather's clutter has a reach (fog's backscatter a few
     metres; ``crowded_poles`` (P,) bool marks it); a post beyond it, seen on one ring by one return, as far
-    posts are, is left alone."""
+    posts are, is left alone. Without ``within_reach``, at any range: snow's flakes reach beyond where they are
+    crowded (open ground, os1-64, tuning seed 103: crowded to about 8 m, the snow's returns to 14 m at their 99th
+    percentile; 4,518 of the 4,546 poles kept over the sequence were flakes at 7-10 m)."""
     single = counts == 1
     crowded_single = crowded_poles & single
     if np.count_nonzero(crowded_single) < MIN_CLUTTER_POLES:
         return np.zeros(len(points), dtype=bool)
     r = np.hypot(points[:, 0], points[:, 1])
-    reach = CLUTTER_REACH_MARGIN * float(np.quantile(r[crowded_single], CLUTTER_REACH_QUANTILE))
+    reach = CLUTTER_REACH_MARGIN * float(np.quantile(r[crowded_single], CLUTTER_REACH_QUANTILE)) if within_reach \
+        else np.inf
     return single & (r <= reach) & ~seen_by_another_ring(points, n_columns)
 
 

@@ -121,7 +121,8 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
     if with_poles or gated:
         t = time.perf_counter()
         poles = extract_poles(clean.points, image_rings, sensor.rings, sensor.columns_per_sweep,
-                              config.poles.max_width_m, times, clutter_filter=config.poles.clutter_filter or gated)
+                              config.poles.max_width_m, times, clutter_filter=config.poles.clutter_filter or gated,
+                              clutter_reach=config.poles.clutter_reach)
         poles_seconds = time.perf_counter() - t
     surface, surface_times, surface_rings, isolated = clean.points, times, clean.rings, 0
     if config.clean.drop_isolated and not (gated and poles.clutter_per_beam <= CLUTTERED_PER_BEAM):

@@ -346,3 +346,7 @@ def test_a_lone_single_return_is_a_suspect_only_within_the_clutters_reach():
     few = np.zeros(len(points), dtype=bool)
     few[:19] = True
     assert not alone_within_the_clutter(points, counts, few, n_columns).any()
+    # (without the reach, poles.clutter_reach false: the far single return is a suspect too, the rest still not)
+    anywhere = alone_within_the_clutter(points, counts, among, n_columns, within_reach=False)
+    assert anywhere[80] and anywhere[83] and not anywhere[[81, 82, 84]].any()
+    assert not alone_within_the_clutter(points, counts, few, n_columns, within_reach=False).any()
