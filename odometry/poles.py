@@ -154,8 +154,14 @@ class WeatherGate:
         self.in_weather = False
 
     def update(self, clutter_per_beam: float) -> bool:
-        self.in_weather = clutter_per_beam > (LEAVE_PER_BEAM if self.in_weather else CLUTTERED_PER_BEAM)
+        self.in_weather = clutter_per_beam > LEAVE_PER_BEAM if self.in_weather else cluttered(clutter_per_beam)
         return self.in_weather
+
+
+def cluttered(clutter_per_beam: float) -> bool:
+    """Whether a scan, on its own (no memory of the scans before), is in weather: its crowded one-return poles per
+    beam (``Poles.clutter_per_beam``) over ``CLUTTERED_PER_BEAM``. ``WeatherGate`` enters weather by it."""
+    return clutter_per_beam > CLUTTERED_PER_BEAM
 
 
 def extract_poles(points: np.ndarray, rings: np.ndarray, n_rings: int, n_columns: int, max_width_m: float,

@@ -29,7 +29,7 @@ from .diagnostics import FrameDiagnostics
 from .filters import FilteredScan, filter_scan
 from .gcr import correct_kitti_vertical_angle, ring_of_points
 from .isolation import isolated_returns
-from .poles import CLUTTERED_PER_BEAM, extract_poles
+from .poles import cluttered, extract_poles
 
 
 @dataclass
@@ -125,7 +125,7 @@ def prepare_scan(points: np.ndarray, times_s: np.ndarray | None, rings: np.ndarr
                               clutter_reach=config.poles.clutter_reach)
         poles_seconds = time.perf_counter() - t
     surface, surface_times, surface_rings, isolated = clean.points, times, clean.rings, 0
-    if config.clean.drop_isolated and not (gated and poles.clutter_per_beam <= CLUTTERED_PER_BEAM):
+    if config.clean.drop_isolated and (not gated or cluttered(poles.clutter_per_beam)):
         c = config.clean
         # (without a sensor, no range image: every return judged by its nearest beams in direction)
         n_rings, n_columns = (sensor.rings, sensor.columns_per_sweep) if sensor is not None else (0, 0)
